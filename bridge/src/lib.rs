@@ -1,0 +1,2 @@
+//! qicp-bridge: see the crate description.
+#![warn(missing_docs)]

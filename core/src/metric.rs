@@ -1,0 +1,159 @@
+//! The correspondence plug-in point: how scan points are paired with reference points,
+//! expressed as queries on any [`SpatialIndex`].
+
+use crate::index::{PointId, SpatialIndex, dist_sq};
+use crate::{Pose2, normalize_angle};
+use nalgebra::Point2;
+
+/// A scan point paired with a reference point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pair {
+    /// Index of the scan point (into [`Scan::points`](crate::Scan::points)).
+    pub scan: u32,
+    /// Id of the reference point.
+    pub reference: PointId,
+    /// Squared distance between them under the current estimate.
+    pub dist_sq: f64,
+}
+
+/// One correspondence search: the scan under the current estimate.
+#[derive(Debug, Clone, Copy)]
+pub struct Query<'a> {
+    /// Scan points in the scan's own (laser) frame.
+    pub local: &'a [Point2<f64>],
+    /// The same points moved into the reference frame by `pose`.
+    pub points: &'a [Point2<f64>],
+    /// Current estimate of the scan's pose in the reference frame.
+    pub pose: Pose2,
+    /// Pairs farther apart than this are outliers and are not formed (m).
+    pub max_dist: f64,
+}
+
+/// Pairs scan points with reference points.
+pub trait CorrespondenceMetric {
+    /// Called once per scan, before its first [`pair`](Self::pair), with the scan's points in
+    /// its own frame. Metrics that index the scan itself build that index here.
+    fn begin_scan(&mut self, _local: &[Point2<f64>]) {}
+
+    /// Fills `out` with the pairs for this estimate.
+    fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>);
+}
+
+/// The closest-point rule: each scan point pairs with its nearest reference point.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ClosestPoint;
+
+impl CorrespondenceMetric for ClosestPoint {
+    fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
+        out.clear();
+        let limit = query.max_dist * query.max_dist;
+        for (k, p) in query.points.iter().enumerate() {
+            if let Some(n) = reference.nearest_within(p, limit) {
+                out.push(Pair {
+                    scan: k as u32,
+                    reference: n.id,
+                    dist_sq: n.dist_sq,
+                });
+            }
+        }
+    }
+}
+
+/// IDC's matching-range rule (Lu & Milios 1997, Sec. 4.2): in polar coordinates about the
+/// sensor, a scan point at (r, φ) pairs with the reference point inside the angular window
+/// φ ± `window` whose range is closest to r, if within `max_dist`.
+#[derive(Debug, Clone, Default)]
+pub struct MatchingRange {
+    /// Half-width of the angular window (rad).
+    pub window: f64,
+    scratch: Vec<crate::Neighbour>,
+}
+
+impl MatchingRange {
+    /// The rule with the given window.
+    #[must_use]
+    pub fn new(window: f64) -> Self {
+        Self {
+            window,
+            scratch: Vec::new(),
+        }
+    }
+}
+
+impl CorrespondenceMetric for MatchingRange {
+    fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
+        out.clear();
+        let o = Point2::new(query.pose.x, query.pose.y);
+        for (k, p) in query.points.iter().enumerate() {
+            let d = p - o;
+            let r = d.norm();
+            let phi = d.y.atan2(d.x);
+            // Every point of the window with |r' − r| ≤ max_dist lies within this circle.
+            let reach = query.max_dist + (r + query.max_dist) * self.window.min(1.0);
+            reference.within_radius(p, reach, &mut self.scratch);
+            let mut best: Option<(f64, PointId, f64)> = None;
+            for n in &self.scratch {
+                let e = n.point - o;
+                let dr = (e.norm() - r).abs();
+                if dr > query.max_dist || normalize_angle(e.y.atan2(e.x) - phi).abs() > self.window
+                {
+                    continue;
+                }
+                if best.is_none_or(|b| dr < b.0) {
+                    best = Some((dr, n.id, n.dist_sq));
+                }
+            }
+            if let Some((_, id, d2)) = best {
+                out.push(Pair {
+                    scan: k as u32,
+                    reference: id,
+                    dist_sq: d2,
+                });
+            }
+        }
+    }
+}
+
+/// Mutual nearest neighbours (paper Alg. 2): scan point p pairs with its nearest reference
+/// point cA only if p is in turn cA's nearest point of the scan (searched in a temporary index
+/// `S` of the scan built once per scan in the scan's own frame).
+#[derive(Debug, Clone, Default)]
+pub struct MutualNearest<S> {
+    scan_index: S,
+}
+
+impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
+    fn begin_scan(&mut self, local: &[Point2<f64>]) {
+        // paper Alg. 2: Qscan = temporary quad tree for all scan points p ∈ st
+        self.scan_index.clear();
+        for p in local {
+            // Scan points are finite by construction; a refused one simply cannot pair.
+            let _ = self.scan_index.insert(*p);
+        }
+    }
+
+    fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
+        out.clear();
+        let limit = query.max_dist * query.max_dist;
+        for (k, p) in query.points.iter().enumerate() {
+            // cA = nearest neighbour of p in Qt
+            let Some(ca) = reference.nearest_within(p, limit) else {
+                continue;
+            };
+            // cB = nearest neighbour of cA in Qscan (taken in the scan frame)
+            let ca_local = query.pose.inverse_transform_point(&ca.point);
+            let Some(cb) = self.scan_index.nearest(&ca_local) else {
+                continue;
+            };
+            // if cB = p: a tie at the same distance counts as p too
+            let mutual = cb.id as usize == k || cb.dist_sq >= dist_sq(&query.local[k], &ca_local);
+            if mutual {
+                out.push(Pair {
+                    scan: k as u32,
+                    reference: ca.id,
+                    dist_sq: ca.dist_sq,
+                });
+            }
+        }
+    }
+}

@@ -1,0 +1,2 @@
+//! qicp-matchers: see the crate description.
+#![warn(missing_docs)]

@@ -1,0 +1,2 @@
+//! qicp-sim: see the crate description.
+#![warn(missing_docs)]
