@@ -1,1 +1,38 @@
-fn main() {}
+//! `qicp`: the command-line front end of the qicp scan-matching framework.
+
+mod bench;
+mod eval;
+mod logs;
+mod sim_cmd;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+/// 2D laser scan matching boosted by quad trees (Slamet, Visser, Pfingsthorn).
+#[derive(Debug, Parser)]
+#[command(name = "qicp", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Benchmarks (print a table, or JSON with --json).
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+    /// Evaluate trajectories.
+    #[command(subcommand)]
+    Eval(eval::EvalCommand),
+    /// Simulate a drive and write a CARMEN log, ground truth and odometry.
+    Sim(sim_cmd::SimArgs),
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Bench(c) => bench::run(c),
+        Command::Eval(c) => eval::run(c),
+        Command::Sim(a) => sim_cmd::run(a),
+    }
+}

@@ -17,6 +17,7 @@ pub mod matcher;
 pub mod metric;
 pub mod pose;
 pub mod quadtree;
+pub mod record;
 pub mod reference;
 pub mod result;
 pub mod scan;
@@ -29,6 +30,7 @@ pub use metric::{ClosestPoint, CorrespondenceMetric, MatchingRange, MutualNeares
 pub use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 pub use pose::{Pose2, normalize_angle};
 pub use quadtree::{QuadTree, QuadTreeN};
+pub use record::Record;
 pub use reference::{LaserNoise, PointInfo, Reference, scan_point_info};
 pub use result::{Fallback, MatchResult};
 pub use scan::{BeamGeometry, BeamStatus, Scan, ScanError};

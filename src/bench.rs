@@ -1,0 +1,12 @@
+//! `qicp bench …`: user-facing benchmarks that print JSON.
+
+use anyhow::Result;
+use clap::Subcommand;
+
+/// Benchmarks.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {}
+
+pub fn run(c: BenchCommand) -> Result<()> {
+    match c {}
+}
