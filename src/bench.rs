@@ -7,6 +7,7 @@ use clap::Subcommand;
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {}
 
+/// Runs the command.
 pub fn run(c: BenchCommand) -> Result<()> {
     match c {}
 }

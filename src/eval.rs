@@ -7,6 +7,7 @@ use clap::Subcommand;
 #[derive(Debug, Subcommand)]
 pub enum EvalCommand {}
 
+/// Runs the command.
 pub fn run(c: EvalCommand) -> Result<()> {
     match c {}
 }

@@ -1,9 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-mod bench;
-mod eval;
-mod logs;
-mod sim_cmd;
+use qicp::{bench, eval, sim_cmd};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

@@ -6,6 +6,7 @@ use anyhow::Result;
 #[derive(Debug, clap::Args)]
 pub struct SimArgs {}
 
+/// Runs the command.
 pub fn run(_a: SimArgs) -> Result<()> {
     anyhow::bail!("not yet implemented")
 }

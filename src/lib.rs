@@ -1,0 +1,10 @@
+//! # qicp
+//!
+//! The application layer of qicp: log readers and writers, evaluation metrics, benchmarks,
+//! simulation and matching commands. The `qicp` binary is a thin front end over this library.
+#![warn(missing_docs)]
+
+pub mod bench;
+pub mod eval;
+pub mod logs;
+pub mod sim_cmd;

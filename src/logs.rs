@@ -1,1 +1,0 @@
-//! Log readers and writers: CARMEN, TUM.
