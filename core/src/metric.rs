@@ -61,7 +61,9 @@ impl CorrespondenceMetric for ClosestPoint {
 
 /// IDC's matching-range rule (Lu & Milios 1997, Sec. 4.2): in polar coordinates about the
 /// sensor, a scan point at (r, φ) pairs with the reference point inside the angular window
-/// φ ± `window` whose range is closest to r, if within `max_dist`.
+/// φ ± `window` whose range is closest to r. Like every pair it must lie within the outlier
+/// gate `max_dist` of the point: in a symmetric corridor the opposite wall has the same range
+/// inside a wide window.
 #[derive(Debug, Clone, Default)]
 pub struct MatchingRange {
     /// Half-width of the angular window (rad).
@@ -88,9 +90,7 @@ impl CorrespondenceMetric for MatchingRange {
             let d = p - o;
             let r = d.norm();
             let phi = d.y.atan2(d.x);
-            // Every point of the window with |r' − r| ≤ max_dist lies within this circle.
-            let reach = query.max_dist + (r + query.max_dist) * self.window.min(1.0);
-            reference.within_radius(p, reach, &mut self.scratch);
+            reference.within_radius(p, query.max_dist, &mut self.scratch);
             let mut best: Option<(f64, PointId, f64)> = None;
             for n in &self.scratch {
                 let e = n.point - o;
@@ -117,9 +117,19 @@ impl CorrespondenceMetric for MatchingRange {
 /// Mutual nearest neighbours (paper Alg. 2): scan point p pairs with its nearest reference
 /// point cA only if p is in turn cA's nearest point of the scan (searched in a temporary index
 /// `S` of the scan built once per scan in the scan's own frame).
+///
+/// Guard: when fewer than [`MutualNearest::MIN_PAIRS`] pairs are mutual (a few posts in view
+/// with a large initial error), the closest-point pairs are used for that iteration instead,
+/// so sparse scenes still converge; once the estimate is close the mutual pairs take over.
 #[derive(Debug, Clone, Default)]
 pub struct MutualNearest<S> {
     scan_index: S,
+    closest: Vec<Pair>,
+}
+
+impl<S> MutualNearest<S> {
+    /// Fewest mutual pairs that are used as they are.
+    pub const MIN_PAIRS: usize = 12;
 }
 
 impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
@@ -134,12 +144,19 @@ impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
 
     fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
         out.clear();
+        self.closest.clear();
         let limit = query.max_dist * query.max_dist;
         for (k, p) in query.points.iter().enumerate() {
             // cA = nearest neighbour of p in Qt
             let Some(ca) = reference.nearest_within(p, limit) else {
                 continue;
             };
+            let pair = Pair {
+                scan: k as u32,
+                reference: ca.id,
+                dist_sq: ca.dist_sq,
+            };
+            self.closest.push(pair);
             // cB = nearest neighbour of cA in Qscan (taken in the scan frame)
             let ca_local = query.pose.inverse_transform_point(&ca.point);
             let Some(cb) = self.scan_index.nearest(&ca_local) else {
@@ -148,12 +165,11 @@ impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
             // if cB = p: a tie at the same distance counts as p too
             let mutual = cb.id as usize == k || cb.dist_sq >= dist_sq(&query.local[k], &ca_local);
             if mutual {
-                out.push(Pair {
-                    scan: k as u32,
-                    reference: ca.id,
-                    dist_sq: ca.dist_sq,
-                });
+                out.push(pair);
             }
+        }
+        if out.len() < Self::MIN_PAIRS {
+            std::mem::swap(out, &mut self.closest);
         }
     }
 }

@@ -56,56 +56,70 @@ pub struct PointInfo {
     pub covariance: Matrix2<f64>,
 }
 
-/// Neighbouring beams farther apart than this many times the expected spacing, or than
-/// [`MAX_NEIGHBOUR_GAP`], lie on different surfaces.
-const GAP_FACTOR: f64 = 3.0;
-/// Absolute limit on the distance of two points used to estimate a normal (m).
-pub const MAX_NEIGHBOUR_GAP: f64 = 0.5;
+/// Two neighbouring beams' points lie on one surface when they are closer than this…
+pub const NEIGHBOUR_GAP: f64 = 0.3;
+/// … or than this fraction of the range (a wall seen at a grazing angle is sampled sparsely).
+pub const NEIGHBOUR_GAP_PER_METRE: f64 = 0.15;
 
-/// Per-point normals and spacings of one scan, in the laser frame, from its neighbouring beams.
+/// Beams on either side of a point used to fit its surface.
+const HALF_WINDOW: usize = 2;
+
+/// Per-point normals and spacings of one scan, in the laser frame: a line fitted (principal
+/// axis) through the point and its connected neighbours within ±2 beams.
 #[must_use]
 pub fn scan_point_info(scan: &Scan, noise: &LaserNoise) -> Vec<PointInfo> {
     let pts = scan.points();
     let beams = scan.beam_of_point();
     let step = scan.geometry.angle_increment.abs().max(1e-6);
-    let neighbour = |k: usize, j: usize| -> Option<Point2<f64>> {
-        let gap = (pts[k] - pts[j]).norm();
-        let expected = scan.point_range(k) * step * beams[k].abs_diff(beams[j]) as f64;
-        (beams[k].abs_diff(beams[j]) <= 2
-            && gap <= MAX_NEIGHBOUR_GAP.max(GAP_FACTOR * expected)
-            && gap < MAX_NEIGHBOUR_GAP * 4.0)
-            .then_some(pts[j])
-    };
+    // connected[k]: point k and point k + 1 lie on one surface.
+    let connected: Vec<bool> = (0..pts.len().saturating_sub(1))
+        .map(|k| {
+            let beams_apart = beams[k].abs_diff(beams[k + 1]);
+            let limit = NEIGHBOUR_GAP.max(NEIGHBOUR_GAP_PER_METRE * scan.point_range(k));
+            beams_apart <= 2 && (pts[k] - pts[k + 1]).norm() <= limit * beams_apart as f64
+        })
+        .collect();
     (0..pts.len())
         .map(|k| {
-            let prev = (k > 0).then(|| neighbour(k, k - 1)).flatten();
-            let next = (k + 1 < pts.len()).then(|| neighbour(k, k + 1)).flatten();
-            let (a, b) = match (prev, next) {
-                (Some(a), Some(b)) => (a, b),
-                (Some(a), None) => (a, pts[k]),
-                (None, Some(b)) => (pts[k], b),
-                (None, None) => (pts[k], pts[k]),
-            };
-            let tangent = b - a;
-            let len = tangent.norm();
-            let range = scan.point_range(k);
-            let mut normal = Vector2::zeros();
-            if len > 1e-9 {
-                normal = Vector2::new(-tangent.y, tangent.x) / len;
-                // Face the sensor (at the laser origin).
-                if normal.dot(&pts[k].coords) > 0.0 {
-                    normal = -normal;
-                }
+            let mut lo = k;
+            while lo > 0 && k - lo < HALF_WINDOW && connected[lo - 1] {
+                lo -= 1;
             }
-            let spacing = match (prev, next) {
-                (Some(_), Some(_)) => len / 2.0,
-                (None, None) => range * step,
-                _ => len,
-            };
+            let mut hi = k;
+            while hi + 1 < pts.len() && hi - k < HALF_WINDOW && connected[hi] {
+                hi += 1;
+            }
+            let range = scan.point_range(k);
+            let covariance = noise.point_covariance(range, scan.point_angle(k));
+            if hi == lo {
+                return PointInfo {
+                    normal: Vector2::zeros(),
+                    spacing: (range * step).max(1e-4),
+                    covariance,
+                };
+            }
+            let window = &pts[lo..=hi];
+            let n = window.len() as f64;
+            let mean = window.iter().fold(Vector2::zeros(), |m, p| m + p.coords) / n;
+            let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+            for p in window {
+                let d = p.coords - mean;
+                sxx += d.x * d.x;
+                sxy += d.x * d.y;
+                syy += d.y * d.y;
+            }
+            // Direction of the principal axis of the 2×2 scatter matrix.
+            let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+            let mut normal = Vector2::new(-angle.sin(), angle.cos());
+            // Face the sensor (at the laser origin).
+            if normal.dot(&pts[k].coords) > 0.0 {
+                normal = -normal;
+            }
+            let spacing = (window[window.len() - 1] - window[0]).norm() / (n - 1.0);
             PointInfo {
                 normal,
                 spacing: spacing.max(1e-4),
-                covariance: noise.point_covariance(range, scan.point_angle(k)),
+                covariance,
             }
         })
         .collect()

@@ -117,3 +117,133 @@ pub fn laser_scans(n: usize, seed: u64) -> Vec<Point2<f64>> {
     }
     out
 }
+
+/// A world of wall segments and round posts for synthetic scans with known geometry.
+#[derive(Debug, Clone, Default)]
+pub struct SyntheticWorld {
+    /// Walls as `[x0, y0, x1, y1]`.
+    pub walls: Vec<[f64; 4]>,
+    /// Posts as `(x, y, radius)`.
+    pub posts: Vec<(f64, f64, f64)>,
+}
+
+impl SyntheticWorld {
+    /// A 10 m × 8 m room with a pillar, a cupboard and a doorway.
+    #[must_use]
+    pub fn room() -> Self {
+        Self {
+            walls: vec![
+                [-5.0, -4.0, 5.0, -4.0],
+                [5.0, -4.0, 5.0, 4.0],
+                [5.0, 4.0, 1.0, 4.0],
+                [0.0, 4.0, -5.0, 4.0],
+                [-5.0, 4.0, -5.0, -4.0],
+                [2.0, -4.0, 2.0, -3.0],
+                [2.0, -3.0, 3.5, -3.0],
+                [3.5, -3.0, 3.5, -4.0],
+            ],
+            posts: vec![(-2.0, 1.5, 0.3)],
+        }
+    }
+
+    /// A corridor 2.4 m wide ending in a wall 13 m ahead, with a door recess on the right and
+    /// a doorway into a room on the left: long walls, few features along its axis.
+    #[must_use]
+    pub fn corridor() -> Self {
+        Self {
+            walls: vec![
+                // right wall with a door recess
+                [-20.0, -1.2, -3.0, -1.2],
+                [-3.0, -1.2, -3.0, -1.6],
+                [-3.0, -1.6, -2.0, -1.6],
+                [-2.0, -1.6, -2.0, -1.2],
+                [-2.0, -1.2, 12.0, -1.2],
+                // end wall
+                [12.0, -1.2, 12.0, 1.2],
+                // left wall with a doorway into a 3 m × 3 m room
+                [-20.0, 1.2, 4.0, 1.2],
+                [5.0, 1.2, 12.0, 1.2],
+                [4.0, 1.2, 4.0, 4.2],
+                [4.0, 4.2, 7.0, 4.2],
+                [7.0, 4.2, 7.0, 1.2],
+            ],
+            posts: vec![],
+        }
+    }
+
+    /// A long corridor with no feature at all along its axis.
+    #[must_use]
+    pub fn featureless_corridor() -> Self {
+        Self {
+            walls: vec![[-50.0, -1.2, 50.0, -1.2], [-50.0, 1.2, 50.0, 1.2]],
+            posts: vec![],
+        }
+    }
+
+    /// Sparse posts outdoors (the paper's park in miniature).
+    #[must_use]
+    pub fn posts() -> Self {
+        Self {
+            walls: vec![],
+            posts: vec![
+                (4.0, 1.0, 0.3),
+                (6.0, -3.0, 0.45),
+                (2.5, 4.0, 0.2),
+                (9.0, 2.0, 0.35),
+                (-1.0, -5.0, 0.25),
+                (7.5, 6.0, 0.4),
+            ],
+        }
+    }
+
+    /// Range along a ray from `(ox, oy)` in direction `(dx, dy)` (unit), or `max_range`.
+    #[must_use]
+    pub fn cast(&self, ox: f64, oy: f64, dx: f64, dy: f64, max_range: f64) -> f64 {
+        let mut best = max_range;
+        for w in &self.walls {
+            let (ex, ey) = (w[2] - w[0], w[3] - w[1]);
+            let den = dx * ey - dy * ex;
+            if den.abs() < 1e-12 {
+                continue;
+            }
+            let t = ((w[0] - ox) * ey - (w[1] - oy) * ex) / den;
+            let u = ((w[0] - ox) * dy - (w[1] - oy) * dx) / den;
+            if t > 0.0 && (0.0..=1.0).contains(&u) {
+                best = best.min(t);
+            }
+        }
+        for &(px, py, pr) in &self.posts {
+            let (fx, fy) = (ox - px, oy - py);
+            let b = fx * dx + fy * dy;
+            let disc = b * b - (fx * fx + fy * fy - pr * pr);
+            if disc >= 0.0 {
+                let t = -b - disc.sqrt();
+                if t > 0.0 {
+                    best = best.min(t);
+                }
+            }
+        }
+        best
+    }
+
+    /// A 181-beam, 180° scan (max range 30 m) from the laser pose `pose`, with Gaussian range
+    /// noise `sigma` (seeded).
+    #[must_use]
+    pub fn scan(&self, pose: &crate::Pose2, sigma: f64, seed: u64) -> crate::Scan {
+        let geometry = crate::BeamGeometry::centered(181, std::f64::consts::PI, 30.0);
+        let mut r = SplitMix::new(seed);
+        let ranges = (0..181)
+            .map(|i| {
+                let a = pose.theta + geometry.angle(i);
+                let range = self.cast(pose.x, pose.y, a.cos(), a.sin(), geometry.max_range);
+                if range < geometry.max_range {
+                    range + sigma * r.normal()
+                } else {
+                    range
+                }
+            })
+            .collect();
+        // The geometry is valid and there are 181 beams: this cannot fail.
+        crate::Scan::new(0.0, geometry, ranges).unwrap_or_else(|_| unreachable!())
+    }
+}

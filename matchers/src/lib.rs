@@ -1,2 +1,25 @@
-//! qicp-matchers: see the crate description.
+//! # qicp-matchers
+//!
+//! The scan matchers of qicp and the pipelines that turn them into laser odometry:
+//!
+//! - [`Idc`]: Iterative Dual Correspondence (Lu & Milios 1997);
+//! - [`Wsm`]: Weighted Scan Matching (Pfister et al. 2002);
+//! - [`Pipeline`]: a matcher with a reference policy, scan-to-scan ([`Policy::Incremental`])
+//!   or boosted against a map of every relevant scan ([`Policy::Boosted`], paper Alg. 1) with
+//!   mutual-nearest correspondences (paper Alg. 2). The named compositions are type aliases:
+//!   [`QIdc`], [`QWsm`], [`KdIdc`], [`KdWsm`];
+//! - [`MatcherConfig`]: the TOML registry that builds any of them as `Box<dyn Odometry>`.
 #![warn(missing_docs)]
+
+pub mod config;
+pub mod icp;
+pub mod idc;
+pub mod lsq;
+pub mod pipeline;
+pub mod wsm;
+
+pub use config::{ConfigError, KdIdc, KdWsm, MatcherConfig, MatcherKind, QIdc, QWsm};
+pub use icp::IcpParams;
+pub use idc::{Idc, IdcParams};
+pub use pipeline::{BoostParams, Estimate, Odometry, Pipeline, Policy};
+pub use wsm::{Wsm, WsmParams};

@@ -1,0 +1,304 @@
+//! Matcher choice and parameters from TOML, and the registry that builds them.
+//!
+//! ```toml
+//! [matcher]
+//! kind = "q-wsm"          # idc | wsm | q-idc | q-wsm | kd-idc | kd-wsm
+//! [matcher.icp]           # iteration (all kinds)
+//! max_iterations = 40
+//! [matcher.wsm]           # wsm kinds only
+//! sigma_range = 0.01
+//! [matcher.boost]         # q-* and kd-* kinds only (paper Alg. 1 thresholds)
+//! tau_max = 0.25
+//! ```
+//! Unknown keys, values out of range and sections the chosen kind does not use are refused
+//! with a message naming the key.
+
+use crate::icp::IcpParams;
+use crate::idc::{Idc, IdcParams};
+use crate::pipeline::{BoostParams, Odometry, Pipeline, Policy};
+use crate::wsm::{Wsm, WsmParams};
+use qicp_core::{ClosestPoint, KdTree, MutualNearest, QuadTree};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A configuration that cannot be used.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ConfigError {
+    /// The TOML does not parse or does not fit the schema (unknown key, wrong type…).
+    #[error("{0}")]
+    Parse(String),
+    /// A value is out of range.
+    #[error("`{key}`: {why}")]
+    Invalid {
+        /// Dotted path of the key.
+        key: String,
+        /// What is wrong.
+        why: String,
+    },
+    /// A section the chosen kind does not use.
+    #[error("`{key}` is not used by matcher kind `{kind}`")]
+    Unused {
+        /// Dotted path of the section.
+        key: String,
+        /// The chosen kind.
+        kind: String,
+    },
+}
+
+impl ConfigError {
+    pub(crate) fn invalid(key: &str, why: impl Into<String>) -> Self {
+        Self::Invalid {
+            key: key.into(),
+            why: why.into(),
+        }
+    }
+}
+
+/// The registered matcher kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
+#[serde(rename_all = "kebab-case")]
+pub enum MatcherKind {
+    /// IDC, scan-to-scan.
+    Idc,
+    /// WSM, scan-to-scan.
+    Wsm,
+    /// IDC against a quad-tree map with mutual-nearest pairs (paper Alg. 1 + 2).
+    QIdc,
+    /// WSM against a quad-tree map with mutual-nearest pairs (paper Alg. 1 + 2).
+    QWsm,
+    /// IDC against a kd-tree map.
+    KdIdc,
+    /// WSM against a kd-tree map.
+    KdWsm,
+}
+
+impl MatcherKind {
+    /// Every kind, in report order.
+    pub const ALL: [MatcherKind; 6] = [
+        MatcherKind::Idc,
+        MatcherKind::QIdc,
+        MatcherKind::KdIdc,
+        MatcherKind::Wsm,
+        MatcherKind::QWsm,
+        MatcherKind::KdWsm,
+    ];
+
+    /// The registry name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            MatcherKind::Idc => "idc",
+            MatcherKind::Wsm => "wsm",
+            MatcherKind::QIdc => "q-idc",
+            MatcherKind::QWsm => "q-wsm",
+            MatcherKind::KdIdc => "kd-idc",
+            MatcherKind::KdWsm => "kd-wsm",
+        }
+    }
+
+    /// True for the IDC family.
+    #[must_use]
+    pub fn is_idc(self) -> bool {
+        matches!(
+            self,
+            MatcherKind::Idc | MatcherKind::QIdc | MatcherKind::KdIdc
+        )
+    }
+
+    /// True for the kinds that match against a map.
+    #[must_use]
+    pub fn is_boosted(self) -> bool {
+        !matches!(self, MatcherKind::Idc | MatcherKind::Wsm)
+    }
+}
+
+impl std::fmt::Display for MatcherKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for MatcherKind {
+    type Err = ConfigError;
+    fn from_str(s: &str) -> Result<Self, ConfigError> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                ConfigError::invalid(
+                    "matcher.kind",
+                    format!(
+                        "unknown kind `{s}`; known: {}",
+                        Self::ALL.map(|k| k.name()).join(", ")
+                    ),
+                )
+            })
+    }
+}
+
+/// The `[matcher]` table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MatcherConfig {
+    /// Which matcher.
+    pub kind: MatcherKind,
+    /// Iteration parameters.
+    #[serde(default)]
+    pub icp: IcpParams,
+    /// IDC parameters (IDC kinds only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub idc: Option<IdcParams>,
+    /// WSM parameters (WSM kinds only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wsm: Option<WsmParams>,
+    /// Relevance thresholds (boosted kinds only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boost: Option<BoostParams>,
+}
+
+impl MatcherConfig {
+    /// The defaults of `kind`, every section it uses filled in.
+    #[must_use]
+    pub fn defaults(kind: MatcherKind) -> Self {
+        let mut c = Self {
+            kind,
+            icp: IcpParams::default(),
+            idc: None,
+            wsm: None,
+            boost: None,
+        };
+        c.fill_defaults();
+        c
+    }
+
+    /// Parses the `[matcher]` table of a TOML document and validates it.
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct File {
+            matcher: MatcherConfig,
+        }
+        let file: File = toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
+        let mut c = file.matcher;
+        c.validate()?;
+        c.fill_defaults();
+        Ok(c)
+    }
+
+    /// Fills every section the kind uses with defaults where absent: the effective config.
+    pub fn fill_defaults(&mut self) {
+        if self.kind.is_idc() {
+            self.idc.get_or_insert_with(IdcParams::default);
+        } else {
+            self.wsm.get_or_insert_with(WsmParams::default);
+        }
+        if self.kind.is_boosted() {
+            self.boost.get_or_insert_with(BoostParams::default);
+        }
+    }
+
+    /// Checks values and refuses sections the kind does not use.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let unused = |key: &str| ConfigError::Unused {
+            key: key.into(),
+            kind: self.kind.name().into(),
+        };
+        self.icp.validate()?;
+        match (self.kind.is_idc(), &self.idc, &self.wsm) {
+            (true, _, Some(_)) => return Err(unused("matcher.wsm")),
+            (false, Some(_), _) => return Err(unused("matcher.idc")),
+            _ => {}
+        }
+        if !self.kind.is_boosted() && self.boost.is_some() {
+            return Err(unused("matcher.boost"));
+        }
+        if let Some(p) = &self.idc {
+            p.validate()?;
+        }
+        if let Some(p) = &self.wsm {
+            p.validate()?;
+        }
+        if let Some(p) = &self.boost {
+            p.validate()?;
+        }
+        Ok(())
+    }
+
+    /// The effective config as TOML (every used section, defaults filled in).
+    #[must_use]
+    pub fn to_toml(&self) -> String {
+        #[derive(Serialize)]
+        struct File<'a> {
+            matcher: &'a MatcherConfig,
+        }
+        let mut c = self.clone();
+        c.fill_defaults();
+        toml::to_string_pretty(&File { matcher: &c }).unwrap_or_default()
+    }
+
+    /// Builds the pipeline this config describes.
+    pub fn build(&self) -> Result<Box<dyn Odometry>, ConfigError> {
+        self.validate()?;
+        let mut c = self.clone();
+        c.fill_defaults();
+        let icp = c.icp;
+        let idc = c.idc.unwrap_or_default();
+        let wsm = c.wsm.unwrap_or_default();
+        let boosted = Policy::Boosted(c.boost.unwrap_or_default());
+        let noise = wsm.noise();
+        let name = c.kind.name();
+        Ok(match c.kind {
+            MatcherKind::Idc => Box::new(Pipeline::new(
+                name,
+                Idc::<ClosestPoint>::new(icp, idc),
+                QuadTree::default(),
+                Policy::Incremental,
+                noise,
+            )),
+            MatcherKind::Wsm => Box::new(Pipeline::new(
+                name,
+                Wsm::<ClosestPoint>::new(icp, wsm),
+                QuadTree::default(),
+                Policy::Incremental,
+                noise,
+            )),
+            MatcherKind::QIdc => Box::new(QIdc::new(
+                name,
+                Idc::new(icp, idc),
+                QuadTree::default(),
+                boosted,
+                noise,
+            )),
+            MatcherKind::QWsm => Box::new(QWsm::new(
+                name,
+                Wsm::new(icp, wsm),
+                QuadTree::default(),
+                boosted,
+                noise,
+            )),
+            MatcherKind::KdIdc => Box::new(KdIdc::new(
+                name,
+                Idc::new(icp, idc),
+                KdTree::default(),
+                boosted,
+                noise,
+            )),
+            MatcherKind::KdWsm => Box::new(KdWsm::new(
+                name,
+                Wsm::new(icp, wsm),
+                KdTree::default(),
+                boosted,
+                noise,
+            )),
+        })
+    }
+}
+
+/// Q-IDC: IDC against a quad-tree map, mutual-nearest pairs (paper Alg. 1 + 2).
+pub type QIdc = Pipeline<Idc<MutualNearest<QuadTree>>, QuadTree>;
+/// Q-WSM: WSM against a quad-tree map, mutual-nearest pairs (paper Alg. 1 + 2).
+pub type QWsm = Pipeline<Wsm<MutualNearest<QuadTree>>, QuadTree>;
+/// KD-IDC: IDC against a kd-tree map.
+pub type KdIdc = Pipeline<Idc<MutualNearest<KdTree>>, KdTree>;
+/// KD-WSM: WSM against a kd-tree map.
+pub type KdWsm = Pipeline<Wsm<MutualNearest<KdTree>>, KdTree>;

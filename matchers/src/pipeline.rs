@@ -1,0 +1,192 @@
+//! Laser odometry pipelines: a matcher plus a reference policy. Scan-to-scan (incremental) keeps
+//! the previous scan; boosted (paper Alg. 1) keeps a map of every relevant scan.
+
+use crate::ConfigError;
+use crate::icp::positive;
+use qicp_core::{
+    LaserNoise, MatchResult, Point2, Pose2, Record, Reference, ScanMatcher, SpatialIndex,
+};
+use serde::{Deserialize, Serialize};
+
+/// Alg. 1's relevance thresholds (TOML section `[matcher.boost]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoostParams {
+    /// A scan enters the map when it moved more than this in x or y since the last scan that
+    /// did (τmax, m). Default 0.25.
+    pub tau_max: f64,
+    /// … or turned more than this (ρmax, deg). Default 5.
+    pub rho_max_deg: f64,
+}
+
+impl Default for BoostParams {
+    fn default() -> Self {
+        Self {
+            tau_max: 0.25,
+            rho_max_deg: 5.0,
+        }
+    }
+}
+
+impl BoostParams {
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("matcher.boost.tau_max", self.tau_max)?;
+        positive("matcher.boost.rho_max_deg", self.rho_max_deg)
+    }
+
+    /// paper Alg. 1: relevant if τ̂x > τmax or τ̂y > τmax or ρ̂ > ρmax.
+    #[must_use]
+    pub fn is_relevant(&self, motion: &Pose2) -> bool {
+        motion.x.abs() > self.tau_max
+            || motion.y.abs() > self.tau_max
+            || motion.theta.abs() > self.rho_max_deg.to_radians()
+    }
+}
+
+/// What a pipeline says about one record.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    /// Robot pose in the world (the frame of the first record's odometry).
+    pub pose: Pose2,
+    /// The matcher's result (its pose is relative to the reference frame).
+    pub result: MatchResult,
+    /// Whether the scan entered the reference.
+    pub inserted: bool,
+}
+
+/// A laser-odometry pipeline: feed records in time order, get robot poses.
+/// Object-safe: the TOML registry hands these out as `Box<dyn Odometry>`.
+pub trait Odometry: Send + std::fmt::Debug {
+    /// The registry name, e.g. `"q-wsm"`.
+    fn kind(&self) -> &'static str;
+    /// Matches one record and updates the reference.
+    fn process(&mut self, record: &Record) -> Estimate;
+    /// Points held in the reference (the whole map for boosted pipelines).
+    fn reference_points(&self) -> &[Point2<f64>];
+}
+
+/// How the reference is kept.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Policy {
+    /// Scan-to-scan: the reference is the previous scan with enough points.
+    Incremental,
+    /// Scan-to-map (paper Alg. 1): the reference is the map of all relevant scans.
+    Boosted(BoostParams),
+}
+
+/// A matcher `M` with a reference held in index `I`.
+#[derive(Debug)]
+pub struct Pipeline<M, I> {
+    kind: &'static str,
+    matcher: M,
+    reference: Reference<I>,
+    policy: Policy,
+    noise: LaserNoise,
+    /// Pose of the reference frame in the world: the previous scan's laser pose
+    /// (incremental), the identity (boosted).
+    reference_frame: Pose2,
+    /// Odometry and estimated laser pose of the previous record.
+    last: Option<(Pose2, Pose2)>,
+    /// Laser pose of the last scan inserted into the map.
+    last_inserted: Option<Pose2>,
+}
+
+impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
+    /// A pipeline named `kind` (for reports).
+    pub fn new(
+        kind: &'static str,
+        matcher: M,
+        index: I,
+        policy: Policy,
+        noise: LaserNoise,
+    ) -> Self {
+        Self {
+            kind,
+            matcher,
+            reference: Reference::new(index),
+            policy,
+            noise,
+            reference_frame: Pose2::IDENTITY,
+            last: None,
+            last_inserted: None,
+        }
+    }
+
+    /// The reference (map or previous scan).
+    pub fn reference(&self) -> &Reference<I> {
+        &self.reference
+    }
+
+    fn update_reference(&mut self, record: &Record, laser: &Pose2, result: &MatchResult) -> bool {
+        let matched = result.fallback.is_none() || self.reference.is_empty();
+        let enough = record.scan.valid_count() >= 3;
+        match self.policy {
+            Policy::Incremental => {
+                if !enough {
+                    return false;
+                }
+                self.reference.clear();
+                self.reference_frame = *laser;
+                self.reference
+                    .insert_scan(&record.scan, &Pose2::IDENTITY, &self.noise, false)
+                    .is_ok()
+            }
+            Policy::Boosted(boost) => {
+                let relevant = self
+                    .last_inserted
+                    .is_none_or(|last| boost.is_relevant(&last.between(laser)));
+                // A scan that fell back to odometry is not trusted enough to enter the map.
+                if !(relevant && matched && enough) {
+                    return false;
+                }
+                // paper Alg. 1: insert all scan points of s_global into Q_t
+                let ok = self
+                    .reference
+                    .insert_scan(&record.scan, laser, &self.noise, true)
+                    .is_ok();
+                if ok {
+                    self.last_inserted = Some(*laser);
+                }
+                ok
+            }
+        }
+    }
+}
+
+impl<M, I> Odometry for Pipeline<M, I>
+where
+    M: ScanMatcher + Send + std::fmt::Debug,
+    I: SpatialIndex + Send + std::fmt::Debug,
+{
+    fn kind(&self) -> &'static str {
+        self.kind
+    }
+
+    fn process(&mut self, record: &Record) -> Estimate {
+        let offset = record.laser_offset;
+        // The odometry motion since the previous record, as a motion of the laser.
+        let predicted = match self.last {
+            None => record.odometry * offset,
+            Some((odom, laser)) => {
+                laser * (offset.inverse() * odom.between(&record.odometry) * offset)
+            }
+        };
+        let guess = self.reference_frame.between(&predicted);
+        let result = self
+            .matcher
+            .match_scan(&self.reference, &record.scan, guess);
+        let laser = self.reference_frame * result.pose;
+        let inserted = self.update_reference(record, &laser, &result);
+        self.last = Some((record.odometry, laser));
+        Estimate {
+            pose: laser * offset.inverse(),
+            result,
+            inserted,
+        }
+    }
+
+    fn reference_points(&self) -> &[Point2<f64>] {
+        self.reference.index().points()
+    }
+}

@@ -1,0 +1,249 @@
+//! Weighted Scan Matching (Pfister, Kriechbaum, Roumeliotis, Burdick 2002).
+
+use crate::ConfigError;
+use crate::icp::{IcpParams, move_points, positive, residual, trim};
+use crate::lsq::{NormalEquations, apply_step};
+use qicp_core::{
+    ClosestPoint, CorrespondenceMetric, Fallback, LaserNoise, MatchResult, Matrix2, Matrix3, Pair,
+    Point2, PointInfo, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex, Vector2,
+    scan_point_info,
+};
+use serde::{Deserialize, Serialize};
+
+/// WSM's own parameters (TOML section `[matcher.wsm]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WsmParams {
+    /// Range noise σr, along the beam (m). Default 0.01.
+    pub sigma_range: f64,
+    /// Bearing noise σφ, across the beam (rad). Default 0.001.
+    pub sigma_bearing: f64,
+    /// Scale of the sampling part of the correspondence error, uniform over the sample spacing
+    /// s of the reference surface: variance (s²/12)·scale along the surface. Default 1.
+    pub correspondence_scale: f64,
+    /// The sliding part of the correspondence error (m): how far along the surface the true
+    /// correspondent may lie because the pose is not yet exact. Adds its square to the
+    /// variance along the surface. Default 0.1.
+    pub sigma_slide: f64,
+    /// Share of the along-surface variance also assigned across the surface. Default 0.01.
+    pub normal_fraction: f64,
+}
+
+impl Default for WsmParams {
+    fn default() -> Self {
+        Self {
+            sigma_range: 0.01,
+            sigma_bearing: 0.001,
+            correspondence_scale: 1.0,
+            sigma_slide: 0.1,
+            normal_fraction: 0.01,
+        }
+    }
+}
+
+impl WsmParams {
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("matcher.wsm.sigma_range", self.sigma_range)?;
+        positive("matcher.wsm.sigma_bearing", self.sigma_bearing)?;
+        positive(
+            "matcher.wsm.correspondence_scale",
+            self.correspondence_scale,
+        )?;
+        if !(self.sigma_slide.is_finite() && self.sigma_slide >= 0.0) {
+            return Err(ConfigError::invalid(
+                "matcher.wsm.sigma_slide",
+                format!("{} must be finite and ≥ 0", self.sigma_slide),
+            ));
+        }
+        if !(self.normal_fraction.is_finite() && (0.0..=1.0).contains(&self.normal_fraction)) {
+            return Err(ConfigError::invalid(
+                "matcher.wsm.normal_fraction",
+                format!("{} must be in [0, 1]", self.normal_fraction),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The laser noise model these parameters describe.
+    #[must_use]
+    pub fn noise(&self) -> LaserNoise {
+        LaserNoise {
+            sigma_range: self.sigma_range,
+            sigma_bearing: self.sigma_bearing,
+        }
+    }
+
+    /// Covariance of the correspondence error at a reference point (Pfister et al. Sec. IV):
+    /// the scan point lands anywhere between two samples of the surface, so the error spreads
+    /// along the surface with the sample spacing.
+    #[must_use]
+    pub fn correspondence_covariance(&self, at: &PointInfo) -> Matrix2<f64> {
+        let v = at.spacing * at.spacing / 12.0 * self.correspondence_scale
+            + self.sigma_slide * self.sigma_slide;
+        if at.normal == Vector2::zeros() {
+            return Matrix2::identity() * v;
+        }
+        let n = at.normal;
+        let t = Vector2::new(-n.y, n.x);
+        t * t.transpose() * v + n * n.transpose() * (v * self.normal_fraction)
+    }
+}
+
+/// WSM: every pair is weighted by the inverse of its combined covariance (measurement noise of
+/// both points plus correspondence error) and the weighted least squares is solved by
+/// Gauss–Newton; the inverse information matrix is the pose covariance.
+///
+/// `C` pairs the points: [`ClosestPoint`] scan-to-scan, the paper's
+/// [`MutualNearest`](qicp_core::MutualNearest) against a map (Q-WSM).
+#[derive(Debug, Clone, Default)]
+pub struct Wsm<C = ClosestPoint> {
+    /// Iteration parameters.
+    pub icp: IcpParams,
+    /// WSM's parameters.
+    pub params: WsmParams,
+    metric: C,
+    moved: Vec<Point2<f64>>,
+    pairs: Vec<Pair>,
+    scratch: Vec<f64>,
+}
+
+impl<C: CorrespondenceMetric + Default> Wsm<C> {
+    /// WSM with the given parameters.
+    #[must_use]
+    pub fn new(icp: IcpParams, params: WsmParams) -> Self {
+        Self {
+            icp,
+            params,
+            ..Self::default()
+        }
+    }
+}
+
+impl<C: CorrespondenceMetric> Wsm<C> {
+    /// Pfister et al. Eq. (8)–(15): the weighted normal equations of the current pairs.
+    fn normal_equations<I: SpatialIndex>(
+        &self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        scan_info: &[PointInfo],
+        pose: &Pose2,
+    ) -> NormalEquations {
+        let refs = reference.index().points();
+        let info = reference.info();
+        let rot = pose.rotation();
+        let t = pose.translation();
+        let mut ne = NormalEquations::default();
+        for p in &self.pairs {
+            let a = &info[p.reference as usize];
+            let b = &scan_info[p.scan as usize];
+            // P = C_a + R C_b Rᵀ + C_corr
+            let cov = a.covariance
+                + rot * b.covariance * rot.transpose()
+                + self.params.correspondence_covariance(a);
+            let Some(w) = cov.try_inverse() else { continue };
+            ne.add(
+                &refs[p.reference as usize],
+                &(rot * local[p.scan as usize].coords),
+                &t,
+                &w,
+            );
+        }
+        ne
+    }
+}
+
+impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
+    fn name(&self) -> &'static str {
+        "wsm"
+    }
+
+    fn match_scan<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan: &Scan,
+        guess: Pose2,
+    ) -> MatchResult {
+        let local = scan.points();
+        if local.len() < self.icp.min_correspondences {
+            return MatchResult::fallback(guess, Fallback::TooFewPoints { valid: local.len() });
+        }
+        if reference.is_empty() {
+            return MatchResult::fallback(guess, Fallback::EmptyReference);
+        }
+        let scan_info = scan_point_info(scan, &self.params.noise());
+        self.metric.begin_scan(local);
+        let mut pose = guess;
+        let mut converged = false;
+        let mut iterations = 0;
+        let mut schedule = self.icp.schedule();
+        for it in 0..self.icp.max_iterations {
+            iterations = it + 1;
+            let gate = self.icp.gate(schedule.level);
+            move_points(&pose, local, &mut self.moved);
+            let query = Query {
+                local,
+                points: &self.moved,
+                pose,
+                max_dist: gate,
+            };
+            self.metric.pair(reference.index(), &query, &mut self.pairs);
+            trim(
+                &mut self.pairs,
+                self.icp.trim,
+                self.icp.max_dist_end,
+                &mut self.scratch,
+            );
+            if self.pairs.len() < self.icp.min_correspondences {
+                if it == 0 {
+                    return MatchResult::fallback(
+                        guess,
+                        Fallback::TooFewCorrespondences {
+                            found: self.pairs.len(),
+                        },
+                    );
+                }
+                break;
+            }
+            let Some(step) = self
+                .normal_equations(reference, local, &scan_info, &pose)
+                .solve()
+            else {
+                return MatchResult::fallback(guess, Fallback::Degenerate);
+            };
+            let next = apply_step(&pose, &step);
+            let settled = self.icp.small_step(&pose, &next);
+            pose = next;
+            let final_stage = self.icp.at_last_gate(schedule.level);
+            if schedule.advance(&self.icp, settled, final_stage) {
+                converged = true;
+                break;
+            }
+        }
+        // Final pairs and information at the estimate: covariance = H⁻¹.
+        move_points(&pose, local, &mut self.moved);
+        let query = Query {
+            local,
+            points: &self.moved,
+            pose,
+            max_dist: self.icp.max_dist_end,
+        };
+        self.metric.pair(reference.index(), &query, &mut self.pairs);
+        let h = self
+            .normal_equations(reference, local, &scan_info, &pose)
+            .information();
+        let covariance = h
+            .try_inverse()
+            .filter(|c| c.iter().all(|v| v.is_finite()))
+            .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0));
+        MatchResult {
+            pose,
+            covariance,
+            iterations,
+            correspondences: self.pairs.len(),
+            residual: residual(reference, local, &self.pairs, &pose),
+            converged,
+            fallback: None,
+        }
+    }
+}
