@@ -1,1 +1,117 @@
-fn main() {}
+//! Spatial-index benchmarks: building by insertion and nearest-neighbour queries, for the quad
+//! tree, the kd-tree and (up to 10k points) brute force, sweeping 1k … 1M points of the
+//! realistic `laser_scans` layout.
+//!
+//! How to run: `cargo bench -p qicp-core --bench index` (a few minutes), or
+//! `cargo bench -p qicp-core --bench index -- --test` to run each benchmark once as a smoke test.
+//! Filter with a name, e.g. `-- nearest/quadtree`.
+//!
+//! Queries are the next points of the same seeded stream as the data: fresh sweeps from new
+//! poses in the same building, so they lie near its surfaces like a scan being matched.
+
+use criterion::{
+    BenchmarkId, Criterion, SamplingMode, Throughput, criterion_group, criterion_main,
+};
+use qicp_core::testdata::laser_scans;
+use qicp_core::{BruteForce, KdTree, Point2, QuadTree, SpatialIndex};
+use std::hint::black_box;
+use std::time::Duration;
+
+const SIZES: [usize; 4] = [1_000, 10_000, 100_000, 1_000_000];
+/// Brute force answers a query in O(N): leave it out above this.
+const BRUTE_MAX: usize = 10_000;
+/// Queries per measured iteration of the nearest-neighbour benchmarks.
+const QUERIES: usize = 1_000;
+const SEED: u64 = 7;
+
+/// The first `n` points of the stream are the data, the next [`QUERIES`] the queries.
+fn workload(n: usize) -> (Vec<Point2<f64>>, Vec<Point2<f64>>) {
+    let mut data = laser_scans(n + QUERIES, SEED);
+    let queries = data.split_off(n);
+    (data, queries)
+}
+
+fn build<I: SpatialIndex + Default>(points: &[Point2<f64>]) -> I {
+    let mut index = I::default();
+    for p in points {
+        // The points are finite and within range: insertion cannot fail.
+        let _ = index.insert(black_box(*p));
+    }
+    index
+}
+
+fn query_all<I: SpatialIndex>(index: &I, queries: &[Point2<f64>]) -> f64 {
+    let mut sum = 0.0;
+    for q in queries {
+        if let Some(n) = index.nearest(black_box(q)) {
+            sum += n.dist_sq;
+        }
+    }
+    sum
+}
+
+/// Large builds take a good fraction of a second: a flat sampling of few samples keeps the
+/// sweep within minutes.
+fn tune<M: criterion::measurement::Measurement>(
+    g: &mut criterion::BenchmarkGroup<'_, M>,
+    n: usize,
+) {
+    g.sample_size(if n >= 100_000 { 10 } else { 30 });
+    g.sampling_mode(if n >= 100_000 {
+        SamplingMode::Flat
+    } else {
+        SamplingMode::Auto
+    });
+    g.warm_up_time(Duration::from_millis(500));
+    g.measurement_time(Duration::from_secs(2));
+}
+
+fn insertion(c: &mut Criterion) {
+    let mut g = c.benchmark_group("insert");
+    for n in SIZES {
+        let (data, _) = workload(n);
+        tune(&mut g, n);
+        g.throughput(Throughput::Elements(n as u64));
+        g.bench_with_input(BenchmarkId::new("quadtree", n), &data, |b, d| {
+            b.iter(|| build::<QuadTree>(d));
+        });
+        g.bench_with_input(BenchmarkId::new("kdtree", n), &data, |b, d| {
+            b.iter(|| build::<KdTree>(d));
+        });
+        if n <= BRUTE_MAX {
+            g.bench_with_input(BenchmarkId::new("brute", n), &data, |b, d| {
+                b.iter(|| build::<BruteForce>(d));
+            });
+        }
+    }
+    g.finish();
+}
+
+fn nearest(c: &mut Criterion) {
+    let mut g = c.benchmark_group("nearest");
+    for n in SIZES {
+        let (data, queries) = workload(n);
+        tune(&mut g, 0);
+        g.throughput(Throughput::Elements(QUERIES as u64));
+        let quad: QuadTree = build(&data);
+        g.bench_with_input(BenchmarkId::new("quadtree", n), &queries, |b, q| {
+            b.iter(|| query_all(&quad, q));
+        });
+        drop(quad);
+        let kd: KdTree = build(&data);
+        g.bench_with_input(BenchmarkId::new("kdtree", n), &queries, |b, q| {
+            b.iter(|| query_all(&kd, q));
+        });
+        drop(kd);
+        if n <= BRUTE_MAX {
+            let brute: BruteForce = build(&data);
+            g.bench_with_input(BenchmarkId::new("brute", n), &queries, |b, q| {
+                b.iter(|| query_all(&brute, q));
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, insertion, nearest);
+criterion_main!(benches);
