@@ -1,0 +1,423 @@
+//! World geometry: obstacles (circles and rotated rectangles; walls are thin rectangles) and the
+//! route through them, built from a [`SimConfig`] — procedurally for `park` and `corridor`.
+//!
+//! The same geometry feeds rapier (static colliders), the drawing of `world.png` and the exact
+//! signed distance used by the tests.
+
+use crate::config::{CorridorConfig, ObstacleConfig, ParkConfig, SimConfig, WorldKind};
+use crate::noise::Noise;
+use nalgebra::{Point2, Vector2};
+use thiserror::Error;
+
+/// Why a world could not be built.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum WorldError {
+    /// Procedural placement gave up: the area is too crowded for the requested obstacles.
+    #[error(
+        "could only place {placed} of {wanted} {what} clear of the route; lower their number or route_clearance"
+    )]
+    Crowded {
+        /// Which obstacles.
+        what: &'static str,
+        /// How many fit.
+        placed: usize,
+        /// How many were asked for.
+        wanted: usize,
+    },
+}
+
+/// One static obstacle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Obstacle {
+    /// A round post, trunk or rock.
+    Circle {
+        /// Centre (m).
+        center: Point2<f64>,
+        /// Radius (m).
+        radius: f64,
+    },
+    /// A rectangle (bench, wall), rotated by `angle` about its centre.
+    Rect {
+        /// Centre (m).
+        center: Point2<f64>,
+        /// Half extents along the rectangle's own axes (m).
+        half: Vector2<f64>,
+        /// Rotation (rad, counter-clockwise).
+        angle: f64,
+    },
+}
+
+impl Obstacle {
+    /// A wall along the centre line `a`–`b`, extended by half its thickness at both ends so
+    /// that walls meeting at a corner close it.
+    #[must_use]
+    pub fn wall(a: Point2<f64>, b: Point2<f64>, thickness: f64) -> Self {
+        let d = b - a;
+        Obstacle::Rect {
+            center: a + d / 2.0,
+            half: Vector2::new(d.norm() / 2.0 + thickness / 2.0, thickness / 2.0),
+            angle: d.y.atan2(d.x),
+        }
+    }
+
+    /// Signed distance from `p` to the obstacle's surface: negative inside.
+    #[must_use]
+    pub fn signed_distance(&self, p: &Point2<f64>) -> f64 {
+        match *self {
+            Obstacle::Circle { center, radius } => (p - center).norm() - radius,
+            Obstacle::Rect {
+                center,
+                half,
+                angle,
+            } => {
+                let (s, c) = angle.sin_cos();
+                let d = p - center;
+                let q = Vector2::new(c * d.x + s * d.y, -s * d.x + c * d.y);
+                let e = Vector2::new(q.x.abs() - half.x, q.y.abs() - half.y);
+                let outside = Vector2::new(e.x.max(0.0), e.y.max(0.0)).norm();
+                outside + e.x.max(e.y).min(0.0)
+            }
+        }
+    }
+
+    /// Radius of the smallest circle about the centre that holds the obstacle.
+    #[must_use]
+    pub fn bounding_radius(&self) -> f64 {
+        match *self {
+            Obstacle::Circle { radius, .. } => radius,
+            Obstacle::Rect { half, .. } => half.norm(),
+        }
+    }
+
+    /// The centre.
+    #[must_use]
+    pub fn center(&self) -> Point2<f64> {
+        match *self {
+            Obstacle::Circle { center, .. } | Obstacle::Rect { center, .. } => center,
+        }
+    }
+
+    /// Corners of a rectangle, counter-clockwise; empty for a circle.
+    #[must_use]
+    pub fn corners(&self) -> Vec<Point2<f64>> {
+        match *self {
+            Obstacle::Circle { .. } => Vec::new(),
+            Obstacle::Rect {
+                center,
+                half,
+                angle,
+            } => {
+                let (s, c) = angle.sin_cos();
+                [(1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)]
+                    .iter()
+                    .map(|&(sx, sy)| {
+                        let (x, y) = (sx * half.x, sy * half.y);
+                        center + Vector2::new(c * x - s * y, s * x + c * y)
+                    })
+                    .collect()
+            }
+        }
+    }
+
+    fn from_config(o: &ObstacleConfig) -> Self {
+        match *o {
+            ObstacleConfig::Circle { center, radius } => Obstacle::Circle {
+                center: Point2::new(center[0], center[1]),
+                radius,
+            },
+            ObstacleConfig::Box {
+                center,
+                half_size,
+                angle_deg,
+            } => Obstacle::Rect {
+                center: Point2::new(center[0], center[1]),
+                half: Vector2::new(half_size[0], half_size[1]),
+                angle: angle_deg.to_radians(),
+            },
+            ObstacleConfig::Wall { a, b, thickness } => {
+                Obstacle::wall(Point2::new(a[0], a[1]), Point2::new(b[0], b[1]), thickness)
+            }
+        }
+    }
+}
+
+/// The static world and the route to drive through it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct World {
+    /// Which kind of world.
+    pub kind: WorldKind,
+    /// Every static obstacle.
+    pub obstacles: Vec<Obstacle>,
+    /// Waypoints of the route; the robot starts on the first, facing the second.
+    pub route: Vec<Point2<f64>>,
+    /// Lower-left and upper-right corners of the area of interest (for drawing).
+    pub bounds: (Point2<f64>, Point2<f64>),
+}
+
+impl World {
+    /// Builds the world described by the configuration (which must be valid).
+    pub fn build(cfg: &SimConfig) -> Result<World, WorldError> {
+        let robot_radius = Vector2::new(cfg.robot.size[0], cfg.robot.size[1]).norm() / 2.0;
+        let mut world = match cfg.world.kind {
+            WorldKind::Park => park(&cfg.park(), cfg.world.seed, robot_radius)?,
+            WorldKind::Corridor => corridor(&cfg.corridor()),
+            WorldKind::Custom => World {
+                kind: WorldKind::Custom,
+                obstacles: Vec::new(),
+                route: Vec::new(),
+                bounds: (Point2::origin(), Point2::origin()),
+            },
+        };
+        world
+            .obstacles
+            .extend(cfg.world.obstacles.iter().map(Obstacle::from_config));
+        if let Some(w) = &cfg.drive.waypoints {
+            world.route = w.iter().map(|p| Point2::new(p[0], p[1])).collect();
+        }
+        if world.kind == WorldKind::Custom {
+            world.bounds = bounding_box(&world.obstacles, &world.route, 2.0);
+        }
+        Ok(world)
+    }
+
+    /// Signed distance from `p` to the nearest obstacle surface (negative inside one);
+    /// infinite in an empty world.
+    #[must_use]
+    pub fn signed_distance(&self, p: &Point2<f64>) -> f64 {
+        self.obstacles
+            .iter()
+            .map(|o| o.signed_distance(p))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Length of the route's polyline (m).
+    #[must_use]
+    pub fn route_length(&self) -> f64 {
+        self.route.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
+    }
+}
+
+fn bounding_box(
+    obstacles: &[Obstacle],
+    route: &[Point2<f64>],
+    margin: f64,
+) -> (Point2<f64>, Point2<f64>) {
+    let mut lo = Point2::new(f64::INFINITY, f64::INFINITY);
+    let mut hi = Point2::new(f64::NEG_INFINITY, f64::NEG_INFINITY);
+    let mut grow = |p: Point2<f64>, r: f64| {
+        lo = Point2::new(lo.x.min(p.x - r), lo.y.min(p.y - r));
+        hi = Point2::new(hi.x.max(p.x + r), hi.y.max(p.y + r));
+    };
+    for o in obstacles {
+        grow(o.center(), o.bounding_radius());
+    }
+    for p in route {
+        grow(*p, 0.0);
+    }
+    if !lo.x.is_finite() {
+        return (Point2::new(-1.0, -1.0), Point2::new(1.0, 1.0));
+    }
+    (
+        lo - Vector2::new(margin, margin),
+        hi + Vector2::new(margin, margin),
+    )
+}
+
+/// Distance from `p` to the segment `a`–`b`.
+#[must_use]
+pub fn distance_to_segment(p: &Point2<f64>, a: &Point2<f64>, b: &Point2<f64>) -> f64 {
+    let ab = b - a;
+    let len2 = ab.norm_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + ab * t)).norm()
+}
+
+fn distance_to_polyline(p: &Point2<f64>, line: &[Point2<f64>]) -> f64 {
+    line.windows(2)
+        .map(|w| distance_to_segment(p, &w[0], &w[1]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The park: a clockwise loop from the bottom-right corner, wiggling sideways, with trees,
+/// rocks and benches placed at random but clear of the route.
+fn park(p: &ParkConfig, seed: u64, robot_radius: f64) -> Result<World, WorldError> {
+    let mut rng = Noise::new(seed, 0x7061726b);
+    let [w, h] = p.size;
+    let m = p.route_margin;
+    // Clockwise (seen from above, y up): bottom-right → bottom-left → top-left → top-right.
+    let corners = [
+        Point2::new(w - m, m),
+        Point2::new(m, m),
+        Point2::new(m, h - m),
+        Point2::new(w - m, h - m),
+        Point2::new(w - m, m),
+    ];
+    let mut route = vec![corners[0]];
+    for side in corners.windows(2) {
+        let (a, b) = (side[0], side[1]);
+        let len = (b - a).norm();
+        let n = (len / 8.0).round().max(1.0) as usize;
+        let dir = (b - a) / len;
+        let normal = Vector2::new(-dir.y, dir.x);
+        for k in 1..n {
+            let along = a + (b - a) * (k as f64 / n as f64);
+            let off = rng.uniform(-p.route_wiggle, p.route_wiggle);
+            route.push(along + normal * off);
+        }
+        route.push(b);
+    }
+
+    let mut obstacles: Vec<Obstacle> = Vec::new();
+    let keep_clear = p.route_clearance + robot_radius;
+    let mut place = |obstacles: &mut Vec<Obstacle>,
+                     what: &'static str,
+                     wanted: usize,
+                     make: &mut dyn FnMut(&mut Noise, Point2<f64>) -> Obstacle|
+     -> Result<(), WorldError> {
+        let mut placed = 0;
+        let mut tries = 0;
+        while placed < wanted {
+            tries += 1;
+            if tries > 20_000 {
+                return Err(WorldError::Crowded {
+                    what,
+                    placed,
+                    wanted,
+                });
+            }
+            let c = Point2::new(rng.uniform(0.0, w), rng.uniform(0.0, h));
+            let o = make(&mut rng, c);
+            let r = o.bounding_radius();
+            if distance_to_polyline(&c, &route) < keep_clear + r {
+                continue;
+            }
+            // Keep obstacles apart so the laser sees them as separate objects.
+            if obstacles
+                .iter()
+                .any(|q| (q.center() - c).norm() < q.bounding_radius() + r + 2.0)
+            {
+                continue;
+            }
+            obstacles.push(o);
+            placed += 1;
+        }
+        Ok(())
+    };
+    let [r0, r1] = p.tree_radius;
+    place(&mut obstacles, "trees", p.trees, &mut |rng, c| {
+        Obstacle::Circle {
+            center: c,
+            radius: rng.uniform(r0, r1),
+        }
+    })?;
+    place(&mut obstacles, "rocks", p.rocks, &mut |rng, c| {
+        Obstacle::Circle {
+            center: c,
+            radius: rng.uniform(0.3, 0.8),
+        }
+    })?;
+    place(&mut obstacles, "benches", p.benches, &mut |rng, c| {
+        Obstacle::Rect {
+            center: c,
+            half: Vector2::new(0.8, 0.25),
+            angle: rng.uniform(0.0, std::f64::consts::PI),
+        }
+    })?;
+    Ok(World {
+        kind: WorldKind::Park,
+        obstacles,
+        route,
+        bounds: (Point2::origin(), Point2::new(w, h)),
+    })
+}
+
+/// Maps (along, depth, floor width, floor height) of one side of the floor to a point.
+type SideMap = fn(f64, f64, f64, f64) -> Point2<f64>;
+
+/// The office floor. Seen from the outside in, each side of the floor has: the outer wall, a
+/// row of outer rooms, the corridor (between its outer and inner wall, both with one doorway
+/// per room), a row of inner rooms and the wall of a closed core. The route runs
+/// counter-clockwise along the corridor, zigzagging between its walls.
+fn corridor(c: &CorridorConfig) -> World {
+    let [w, h] = c.size;
+    let (o, cw, i, t) = (
+        c.outer_room_depth,
+        c.corridor_width,
+        c.inner_room_depth,
+        c.wall_thickness,
+    );
+    // Side frames: `u` runs along the side (counter-clockwise), `d` is the depth from the
+    // floor's edge inwards.
+    let sides: [(f64, SideMap); 4] = [
+        (w, |u, d, _w, _h| Point2::new(u, d)),
+        (h, |u, d, w, _h| Point2::new(w - d, u)),
+        (w, |u, d, w, h| Point2::new(w - u, h - d)),
+        (h, |u, d, _w, h| Point2::new(d, h - u)),
+    ];
+    let mut obstacles = Vec::new();
+    let mut route = Vec::new();
+    let centre = o + cw / 2.0;
+    for (len, map) in sides {
+        let at = |u: f64, d: f64| map(u, d, w, h);
+        let mut wall = |u0: f64, u1: f64, d: f64, doors: &[f64]| {
+            // Split the wall at each doorway.
+            let mut start = u0;
+            for &door in doors {
+                let (g0, g1) = (door - c.door_width / 2.0, door + c.door_width / 2.0);
+                if g0 - start > 1e-3 {
+                    obstacles.push(Obstacle::wall(at(start, d), at(g0, d), t));
+                }
+                start = g1;
+            }
+            if u1 - start > 1e-3 {
+                obstacles.push(Obstacle::wall(at(start, d), at(u1, d), t));
+            }
+        };
+        // Outer wall of the floor.
+        wall(0.0, len, 0.0, &[]);
+        // Outer rooms: between the floor's edge and the corridor, one doorway each.
+        let (a, b) = (o, len - o);
+        let n = ((b - a) / c.room_width).round().max(1.0) as usize;
+        let step = (b - a) / n as f64;
+        let doors: Vec<f64> = (0..n).map(|k| a + step * (k as f64 + 0.5)).collect();
+        wall(a, b, o, &doors);
+        let mut partitions: Vec<(f64, f64, f64)> =
+            (0..=n).map(|k| (a + step * k as f64, 0.0, o)).collect();
+        // Inner rooms: between the corridor and the core.
+        let (a, b) = (o + cw + i, len - o - cw - i);
+        let n = ((b - a) / c.room_width).round().max(1.0) as usize;
+        let step = (b - a) / n as f64;
+        let doors: Vec<f64> = (0..n).map(|k| a + step * (k as f64 + 0.5)).collect();
+        wall(o + cw, len - o - cw, o + cw, &doors);
+        partitions.extend((0..=n).map(|k| (a + step * k as f64, o + cw, o + cw + i)));
+        wall(a, b, o + cw + i, &[]);
+        for (u, d0, d1) in partitions {
+            obstacles.push(Obstacle::wall(at(u, d0), at(u, d1), t));
+        }
+        // Zigzag along this side of the corridor, from corner to corner.
+        let (a, b) = (centre, len - centre);
+        let n = ((b - a) / (c.zigzag_period / 2.0)).round().max(2.0) as usize;
+        for k in 0..n {
+            let u = a + (b - a) * k as f64 / n as f64;
+            let off = if k == 0 {
+                0.0
+            } else if k % 2 == 1 {
+                c.zigzag_amplitude
+            } else {
+                -c.zigzag_amplitude
+            };
+            route.push(at(u, centre + off));
+        }
+    }
+    route.push(route[0]);
+    World {
+        kind: WorldKind::Corridor,
+        obstacles,
+        route,
+        bounds: (Point2::origin(), Point2::new(w, h)),
+    }
+}
