@@ -1,8 +1,8 @@
 //! The correspondence plug-in point: how scan points are paired with reference points,
 //! expressed as queries on any [`SpatialIndex`].
 
+use crate::Pose2;
 use crate::index::{PointId, SpatialIndex, dist_sq};
-use crate::{Pose2, normalize_angle};
 use nalgebra::Point2;
 
 /// A scan point paired with a reference point.
@@ -86,19 +86,24 @@ impl CorrespondenceMetric for MatchingRange {
     fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
         out.clear();
         let o = Point2::new(query.pose.x, query.pose.y);
+        let cos_window = self.window.min(std::f64::consts::PI).cos();
         for (k, p) in query.points.iter().enumerate() {
             let d = p - o;
             let r = d.norm();
-            let phi = d.y.atan2(d.x);
+            if r == 0.0 {
+                continue;
+            }
+            let u = d / r;
             reference.within_radius(p, query.max_dist, &mut self.scratch);
             let mut best: Option<(f64, PointId, f64)> = None;
             for n in &self.scratch {
                 let e = n.point - o;
-                let dr = (e.norm() - r).abs();
-                if dr > query.max_dist || normalize_angle(e.y.atan2(e.x) - phi).abs() > self.window
-                {
+                let re = e.norm();
+                // Inside the window: the bearing of e is within ±window of the bearing of d.
+                if re * cos_window > e.dot(&u) {
                     continue;
                 }
+                let dr = (re - r).abs();
                 if best.is_none_or(|b| dr < b.0) {
                     best = Some((dr, n.id, n.dist_sq));
                 }

@@ -7,7 +7,7 @@
 //! max_iterations = 40
 //! [matcher.wsm]           # wsm kinds only
 //! sigma_range = 0.01
-//! [matcher.boost]         # q-* and kd-* kinds only (paper Alg. 1 thresholds)
+//! [matcher.relevance]     # which scans enter the reference (paper Alg. 1 thresholds)
 //! tau_max = 0.25
 //! ```
 //! Unknown keys, values out of range and sections the chosen kind does not use are refused
@@ -15,9 +15,9 @@
 
 use crate::icp::IcpParams;
 use crate::idc::{Idc, IdcParams};
-use crate::pipeline::{BoostParams, Odometry, Pipeline, Policy};
+use crate::pipeline::{Odometry, Pipeline, Policy, Relevance};
 use crate::wsm::{Wsm, WsmParams};
-use qicp_core::{ClosestPoint, KdTree, MutualNearest, QuadTree};
+use qicp_core::{KdTree, MutualNearest, QuadTree};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -58,9 +58,9 @@ impl ConfigError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
 #[serde(rename_all = "kebab-case")]
 pub enum MatcherKind {
-    /// IDC, scan-to-scan.
+    /// IDC, scan-to-scan (against the latest relevant scan, mutual-nearest pairs).
     Idc,
-    /// WSM, scan-to-scan.
+    /// WSM, scan-to-scan (against the latest relevant scan, mutual-nearest pairs).
     Wsm,
     /// IDC against a quad-tree map with mutual-nearest pairs (paper Alg. 1 + 2).
     QIdc,
@@ -151,9 +151,9 @@ pub struct MatcherConfig {
     /// WSM parameters (WSM kinds only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wsm: Option<WsmParams>,
-    /// Relevance thresholds (boosted kinds only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub boost: Option<BoostParams>,
+    /// Which scans enter the reference.
+    #[serde(default)]
+    pub relevance: Relevance,
 }
 
 impl MatcherConfig {
@@ -165,7 +165,7 @@ impl MatcherConfig {
             icp: IcpParams::default(),
             idc: None,
             wsm: None,
-            boost: None,
+            relevance: Relevance::default(),
         };
         c.fill_defaults();
         c
@@ -192,9 +192,6 @@ impl MatcherConfig {
         } else {
             self.wsm.get_or_insert_with(WsmParams::default);
         }
-        if self.kind.is_boosted() {
-            self.boost.get_or_insert_with(BoostParams::default);
-        }
     }
 
     /// Checks values and refuses sections the kind does not use.
@@ -209,18 +206,13 @@ impl MatcherConfig {
             (false, Some(_), _) => return Err(unused("matcher.idc")),
             _ => {}
         }
-        if !self.kind.is_boosted() && self.boost.is_some() {
-            return Err(unused("matcher.boost"));
-        }
         if let Some(p) = &self.idc {
             p.validate()?;
         }
         if let Some(p) = &self.wsm {
             p.validate()?;
         }
-        if let Some(p) = &self.boost {
-            p.validate()?;
-        }
+        self.relevance.validate()?;
         Ok(())
     }
 
@@ -244,22 +236,23 @@ impl MatcherConfig {
         let icp = c.icp;
         let idc = c.idc.unwrap_or_default();
         let wsm = c.wsm.unwrap_or_default();
-        let boosted = Policy::Boosted(c.boost.unwrap_or_default());
+        let boosted = Policy::Boosted(c.relevance);
+        let incremental = Policy::Incremental(c.relevance);
         let noise = wsm.noise();
         let name = c.kind.name();
         Ok(match c.kind {
             MatcherKind::Idc => Box::new(Pipeline::new(
                 name,
-                Idc::<ClosestPoint>::new(icp, idc),
+                Idc::<MutualNearest<QuadTree>>::new(icp, idc),
                 QuadTree::default(),
-                Policy::Incremental,
+                incremental,
                 noise,
             )),
             MatcherKind::Wsm => Box::new(Pipeline::new(
                 name,
-                Wsm::<ClosestPoint>::new(icp, wsm),
+                Wsm::<MutualNearest<QuadTree>>::new(icp, wsm),
                 QuadTree::default(),
-                Policy::Incremental,
+                incremental,
                 noise,
             )),
             MatcherKind::QIdc => Box::new(QIdc::new(

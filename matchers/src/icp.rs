@@ -61,6 +61,18 @@ pub(crate) fn positive(key: &str, v: f64) -> Result<(), ConfigError> {
     }
 }
 
+/// Refuses a value that is negative or not finite.
+pub(crate) fn non_negative(key: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            key,
+            format!("{v} must be finite and ≥ 0"),
+        ))
+    }
+}
+
 impl IcpParams {
     /// Checks every value; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {

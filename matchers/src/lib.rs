@@ -4,7 +4,7 @@
 //!
 //! - [`Idc`]: Iterative Dual Correspondence (Lu & Milios 1997);
 //! - [`Wsm`]: Weighted Scan Matching (Pfister et al. 2002);
-//! - [`Pipeline`]: a matcher with a reference policy, scan-to-scan ([`Policy::Incremental`])
+//! - [`Pipeline`]: a matcher with a reference policy, scan-to-scan against the latest relevant scan ([`Policy::Incremental`])
 //!   or boosted against a map of every relevant scan ([`Policy::Boosted`], paper Alg. 1) with
 //!   mutual-nearest correspondences (paper Alg. 2). The named compositions are type aliases:
 //!   [`QIdc`], [`QWsm`], [`KdIdc`], [`KdWsm`];
@@ -21,5 +21,5 @@ pub mod wsm;
 pub use config::{ConfigError, KdIdc, KdWsm, MatcherConfig, MatcherKind, QIdc, QWsm};
 pub use icp::IcpParams;
 pub use idc::{Idc, IdcParams};
-pub use pipeline::{BoostParams, Estimate, Odometry, Pipeline, Policy};
+pub use pipeline::{Estimate, Odometry, Pipeline, Policy, Relevance};
 pub use wsm::{Wsm, WsmParams};

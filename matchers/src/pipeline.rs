@@ -2,24 +2,27 @@
 //! the previous scan; boosted (paper Alg. 1) keeps a map of every relevant scan.
 
 use crate::ConfigError;
-use crate::icp::positive;
+use crate::icp::non_negative;
 use qicp_core::{
     LaserNoise, MatchResult, Point2, Pose2, Record, Reference, ScanMatcher, SpatialIndex,
 };
 use serde::{Deserialize, Serialize};
 
-/// Alg. 1's relevance thresholds (TOML section `[matcher.boost]`).
+/// Alg. 1's relevance thresholds (TOML section `[matcher.relevance]`): which scans enter
+/// the reference. Boosted pipelines add relevant scans to the map; incremental ones replace
+/// their single reference scan with the latest relevant scan (0 and 0: every scan, the
+/// classic scan-to-scan matcher).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct BoostParams {
-    /// A scan enters the map when it moved more than this in x or y since the last scan that
-    /// did (τmax, m). Default 0.25.
+pub struct Relevance {
+    /// A scan is relevant when it moved more than this in x or y since the last relevant scan
+    /// (τmax, m). Default 0.25.
     pub tau_max: f64,
     /// … or turned more than this (ρmax, deg). Default 5.
     pub rho_max_deg: f64,
 }
 
-impl Default for BoostParams {
+impl Default for Relevance {
     fn default() -> Self {
         Self {
             tau_max: 0.25,
@@ -28,11 +31,11 @@ impl Default for BoostParams {
     }
 }
 
-impl BoostParams {
+impl Relevance {
     /// Checks every value; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        positive("matcher.boost.tau_max", self.tau_max)?;
-        positive("matcher.boost.rho_max_deg", self.rho_max_deg)
+        non_negative("matcher.relevance.tau_max", self.tau_max)?;
+        non_negative("matcher.relevance.rho_max_deg", self.rho_max_deg)
     }
 
     /// paper Alg. 1: relevant if τ̂x > τmax or τ̂y > τmax or ρ̂ > ρmax.
@@ -69,10 +72,10 @@ pub trait Odometry: Send + std::fmt::Debug {
 /// How the reference is kept.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Policy {
-    /// Scan-to-scan: the reference is the previous scan with enough points.
-    Incremental,
+    /// Scan-to-scan: the reference is the latest relevant scan.
+    Incremental(Relevance),
     /// Scan-to-map (paper Alg. 1): the reference is the map of all relevant scans.
-    Boosted(BoostParams),
+    Boosted(Relevance),
 }
 
 /// A matcher `M` with a reference held in index `I`.
@@ -119,11 +122,17 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     }
 
     fn update_reference(&mut self, record: &Record, laser: &Pose2, result: &MatchResult) -> bool {
-        let matched = result.fallback.is_none() || self.reference.is_empty();
+        let matched = result.fallback.is_none();
         let enough = record.scan.valid_count() >= 3;
-        match self.policy {
-            Policy::Incremental => {
-                if !enough {
+        let (Policy::Incremental(relevance) | Policy::Boosted(relevance)) = self.policy;
+        let relevant = self
+            .last_inserted
+            .is_none_or(|last| relevance.is_relevant(&last.between(laser)));
+        let ok = match self.policy {
+            Policy::Incremental(_) => {
+                // A scan that could not be matched against the reference replaces it: the
+                // robot has left what the old one saw.
+                if !(enough && (relevant || !matched)) {
                     return false;
                 }
                 self.reference.clear();
@@ -132,25 +141,22 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     .insert_scan(&record.scan, &Pose2::IDENTITY, &self.noise, false)
                     .is_ok()
             }
-            Policy::Boosted(boost) => {
-                let relevant = self
-                    .last_inserted
-                    .is_none_or(|last| boost.is_relevant(&last.between(laser)));
-                // A scan that fell back to odometry is not trusted enough to enter the map.
-                if !(relevant && matched && enough) {
+            Policy::Boosted(_) => {
+                // A scan that fell back to odometry is not trusted enough to enter the map
+                // (except the first, which founds it).
+                if !(enough && relevant && (matched || self.reference.is_empty())) {
                     return false;
                 }
                 // paper Alg. 1: insert all scan points of s_global into Q_t
-                let ok = self
-                    .reference
+                self.reference
                     .insert_scan(&record.scan, laser, &self.noise, true)
-                    .is_ok();
-                if ok {
-                    self.last_inserted = Some(*laser);
-                }
-                ok
+                    .is_ok()
             }
+        };
+        if ok {
+            self.last_inserted = Some(*laser);
         }
+        ok
     }
 }
 
