@@ -1,8 +1,16 @@
-//! Log readers and writers: CARMEN (`carmen`), TUM trajectories (`tum`).
+//! Log readers and writers: CARMEN (`carmen`), TUM trajectories (`tum`), Freiburg benchmark
+//! relations (`relations`).
+//!
+//! Every reader names the file and the 1-based line of the first problem it meets; none
+//! panics on bad input.
 
 pub mod carmen;
+pub mod relations;
 pub mod tum;
 
+use std::fs::File;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
 use thiserror::Error;
 
 /// Why a log or trajectory file could not be read.
@@ -26,4 +34,71 @@ pub enum LogError {
         /// What is wrong.
         why: String,
     },
+    /// A reader option is not usable (e.g. a negative field of view).
+    #[error("option `{name}`: {why}")]
+    InvalidOption {
+        /// The option.
+        name: &'static str,
+        /// What is wrong with it.
+        why: String,
+    },
+}
+
+impl LogError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        LogError::Io {
+            path: path.display().to_string(),
+            source,
+        }
+    }
+
+    pub(crate) fn malformed(path: &str, line: usize, why: impl Into<String>) -> Self {
+        LogError::Malformed {
+            path: path.to_string(),
+            line,
+            why: why.into(),
+        }
+    }
+}
+
+/// The magic bytes that open every bzip2 stream.
+const BZIP2_MAGIC: &[u8] = b"BZh";
+
+/// Opens a text file for buffered reading, decompressing it on the fly when it is bzip2
+/// (recognised by its magic bytes, not its name; concatenated streams as written by `pbzip2`
+/// are read in full).
+pub fn open_text(path: &Path) -> Result<Box<dyn BufRead>, LogError> {
+    let file = File::open(path).map_err(|e| LogError::io(path, e))?;
+    let mut reader = BufReader::with_capacity(1 << 16, file);
+    let head = reader.fill_buf().map_err(|e| LogError::io(path, e))?;
+    if head.starts_with(BZIP2_MAGIC) {
+        let decoder = bzip2::read::MultiBzDecoder::new(reader);
+        Ok(Box::new(BufReader::with_capacity(1 << 16, decoder)))
+    } else {
+        Ok(Box::new(reader))
+    }
+}
+
+/// Reads lines as bytes into `buf` (cleared first), returning `false` at the end of input.
+/// Strips the line terminator (`\n` or `\r\n`).
+pub(crate) fn next_line<R: BufRead + ?Sized>(
+    reader: &mut R,
+    buf: &mut Vec<u8>,
+) -> std::io::Result<bool> {
+    buf.clear();
+    if reader.read_until(b'\n', buf)? == 0 {
+        return Ok(false);
+    }
+    if buf.last() == Some(&b'\n') {
+        buf.pop();
+        if buf.last() == Some(&b'\r') {
+            buf.pop();
+        }
+    }
+    Ok(true)
+}
+
+/// Parses a number the way C's `strtod` writes them, accepting `nan`, `-nan` and `inf`.
+pub(crate) fn parse_f64(token: &str) -> Option<f64> {
+    token.parse::<f64>().ok()
 }

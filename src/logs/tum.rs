@@ -1,24 +1,124 @@
 //! TUM trajectories: `timestamp x y z qx qy qz qw`, the convention of the `evo` tool.
-//! (Owned by the log helper; signatures fixed, bodies to come.)
+//!
+//! Planar poses are written with z = 0 and the quaternion of a rotation about z by the
+//! heading θ: `qx = qy = 0`, `qz = sin(θ/2)`, `qw = cos(θ/2)`.
 
-use super::LogError;
+use super::{LogError, next_line, parse_f64};
 use qicp_core::Pose2;
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::path::Path;
 
 /// A timestamped pose.
 pub type Stamped = (f64, Pose2);
 
-/// Writes a trajectory in TUM format.
-pub fn write_tum<W: Write>(_w: W, _poses: &[Stamped]) -> std::io::Result<()> {
-    Err(std::io::Error::other("writer not implemented yet"))
+/// Writes a trajectory in TUM format, every number in full (round-tripping) precision.
+pub fn write_tum<W: Write>(w: W, poses: &[Stamped]) -> std::io::Result<()> {
+    let mut w = std::io::BufWriter::new(w);
+    for (t, p) in poses {
+        let (qz, qw) = (p.theta / 2.0).sin_cos();
+        writeln!(w, "{t} {} {} 0 0 0 {qz} {qw}", p.x, p.y)?;
+    }
+    w.flush()
 }
 
-/// Reads a TUM trajectory (planar poses: z, roll and pitch ignored).
+/// Reads a TUM trajectory (planar poses: z, roll and pitch ignored). Blank lines and lines
+/// starting with `#` are skipped; poses are returned in file order.
 pub fn read_tum(path: &Path) -> Result<Vec<Stamped>, LogError> {
-    Err(LogError::Malformed {
-        path: path.display().to_string(),
-        line: 0,
-        why: "reader not implemented yet".into(),
-    })
+    let mut reader = super::open_text(path)?;
+    read_tum_from(&mut reader, &path.display().to_string())
+}
+
+/// Reads a TUM trajectory from any reader; `name` is used in errors.
+pub fn read_tum_from<R: BufRead + ?Sized>(
+    reader: &mut R,
+    name: &str,
+) -> Result<Vec<Stamped>, LogError> {
+    let mut poses = Vec::new();
+    let mut buf = Vec::new();
+    let mut line_no = 0;
+    while next_line(reader, &mut buf).map_err(|e| LogError::Io {
+        path: name.to_string(),
+        source: e,
+    })? {
+        line_no += 1;
+        let line = std::str::from_utf8(&buf)
+            .map_err(|_| LogError::malformed(name, line_no, "not UTF-8 text"))?
+            .trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut v = [0.0; 8];
+        let mut n = 0;
+        for tok in line.split_ascii_whitespace() {
+            if n == 8 {
+                return Err(LogError::malformed(
+                    name,
+                    line_no,
+                    "more than 8 fields (expected `timestamp x y z qx qy qz qw`)",
+                ));
+            }
+            v[n] = parse_f64(tok).filter(|x| x.is_finite()).ok_or_else(|| {
+                LogError::malformed(name, line_no, format!("not a finite number: `{tok}`"))
+            })?;
+            n += 1;
+        }
+        if n != 8 {
+            return Err(LogError::malformed(
+                name,
+                line_no,
+                format!("{n} fields, expected 8 (`timestamp x y z qx qy qz qw`)"),
+            ));
+        }
+        let [t, x, y, _z, qx, qy, qz, qw] = v;
+        if qx * qx + qy * qy + qz * qz + qw * qw < 1e-12 {
+            return Err(LogError::malformed(name, line_no, "zero quaternion"));
+        }
+        // Yaw of the quaternion (z-y-x Euler angles); for a planar pose 2·atan2(qz, qw).
+        let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+        poses.push((t, Pose2::new(x, y, yaw)));
+    }
+    Ok(poses)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trips_in_full_precision() {
+        let poses: Vec<Stamped> = (0..50)
+            .map(|i| {
+                let f = f64::from(i);
+                (
+                    1e9 + f * 0.123_456_789,
+                    Pose2::new(f.sin() * 7.1, f.cos() / 3.0, f * 0.37),
+                )
+            })
+            .collect();
+        let mut out = Vec::new();
+        write_tum(&mut out, &poses).unwrap();
+        let back = read_tum_from(&mut out.as_slice(), "mem").unwrap();
+        assert_eq!(back.len(), poses.len());
+        for ((t, p), (tb, pb)) in poses.iter().zip(&back) {
+            assert_eq!(t, tb);
+            assert_eq!(p.x, pb.x);
+            assert_eq!(p.y, pb.y);
+            assert!(qicp_core::normalize_angle(p.theta - pb.theta).abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn comments_blank_lines_and_errors() {
+        let text = "# header\n\n1 2 3 0 0 0 0 1\n  # indented comment\n2 1 1 0 0 0 1 0\n";
+        let v = read_tum_from(&mut text.as_bytes(), "t.txt").unwrap();
+        assert_eq!(v.len(), 2);
+        assert!((v[1].1.theta.abs() - std::f64::consts::PI).abs() < 1e-12);
+        let bad = "1 2 3 0 0 0 0 1\n\n2 1 1 0 0 x 1 0\n";
+        let e = read_tum_from(&mut bad.as_bytes(), "t.txt").unwrap_err();
+        assert!(matches!(e, LogError::Malformed { line: 3, .. }), "{e}");
+        let short = "1 2 3 0 0 0 1\n";
+        let e = read_tum_from(&mut short.as_bytes(), "t.txt").unwrap_err();
+        assert!(e.to_string().contains("t.txt:1"), "{e}");
+    }
 }

@@ -1,0 +1,97 @@
+//! The Intel Research Lab log (Radish / Freiburg SLAM benchmark): the CARMEN reader on a real,
+//! bzip2-compressed, out-of-order log, and the relations metric on its raw odometry, whose
+//! published figure is 7.37 ± 14.35 m, 39.2° (shared/data/README.md).
+#![allow(clippy::unwrap_used)] // tests: a panic is the failure report
+
+use qicp::eval::{DEFAULT_MAX_DT, evaluate_relations};
+use qicp::logs::carmen::{CarmenOptions, read_carmen};
+use qicp::logs::relations::read_relations;
+use std::path::Path;
+use std::time::Instant;
+
+const INTEL_LOG: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/data/intel/intel.clf.bz2"
+);
+const INTEL_RELATIONS: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/data/intel/intel.relations"
+);
+
+fn present(path: &str) -> bool {
+    let ok = Path::new(path).exists();
+    if !ok {
+        println!("skipping: {path} is absent");
+    }
+    ok
+}
+
+#[test]
+fn intel_log_reads_sorted_with_odometry_matching_the_benchmark() {
+    if !present(INTEL_LOG) || !present(INTEL_RELATIONS) {
+        return;
+    }
+    let start = Instant::now();
+    let log = read_carmen(Path::new(INTEL_LOG), &CarmenOptions::default()).unwrap();
+    let elapsed = start.elapsed();
+    println!("{}", log.report());
+    println!("read in {:.3} s", elapsed.as_secs_f64());
+    // A loose bound: a pathological reader (seconds per MB) fails it, a busy machine does not.
+    assert!(elapsed.as_secs_f64() < 10.0, "reading took {elapsed:?}");
+
+    assert_eq!(log.records.len(), 13_631);
+    assert_eq!(log.counts.get("FLASER"), Some(&13_631));
+    assert_eq!(log.counts.get("ODOM"), Some(&26_915));
+    assert_eq!(log.counts.get("PARAM"), Some(&2));
+    assert_eq!(log.odometry.len(), 26_915);
+    assert!(log.unknown_types.is_empty(), "{:?}", log.unknown_types);
+    assert_eq!(log.skipped_lines, 0);
+    assert!(log.out_of_order > 600, "{}", log.out_of_order);
+    assert!(
+        log.records
+            .windows(2)
+            .all(|w| w[0].timestamp() <= w[1].timestamp())
+    );
+    assert!(log.records.iter().all(|r| r.scan.beams() == 180));
+    assert!(log.records.iter().all(|r| r.truth.is_none()));
+    let duration = log.records.last().unwrap().timestamp() - log.records[0].timestamp();
+    assert!((2680.0..2700.0).contains(&duration), "{duration}");
+
+    // CARMEN's 180-beam layout: −90° … +89° in 1° steps; no-returns at 81 m and beyond.
+    let g = log.records[0].scan.geometry;
+    assert!((g.angle_min + std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    assert!((g.angle_increment - 1f64.to_radians()).abs() < 1e-12);
+    assert_eq!(g.max_range, 81.0);
+    let [valid, max_range, _, invalid] = log
+        .records
+        .iter()
+        .map(|r| r.scan.status_counts())
+        .fold([0; 4], |a, c| {
+            [a[0] + c[0], a[1] + c[1], a[2] + c[2], a[3] + c[3]]
+        });
+    assert!(valid > 13_631 * 100, "{valid}");
+    assert!(max_range > 0);
+    assert_eq!(invalid, 0);
+
+    let relations = read_relations(Path::new(INTEL_RELATIONS)).unwrap();
+    assert_eq!(relations.len(), 2984);
+    let report = evaluate_relations(&log.laser_odometry(), &relations, DEFAULT_MAX_DT).unwrap();
+    println!("{report:?}");
+    assert_eq!(report.n, 2984);
+    assert_eq!(report.missing, 0);
+    assert!((7.0..7.8).contains(&report.trans_mean), "{report:?}");
+    assert!((14.0..14.7).contains(&report.trans_std), "{report:?}");
+    assert!((38.5..40.0).contains(&report.rot_mean_deg), "{report:?}");
+}
+
+#[test]
+fn relation_timestamps_are_laser_timestamps() {
+    if !present(INTEL_LOG) || !present(INTEL_RELATIONS) {
+        return;
+    }
+    let log = read_carmen(Path::new(INTEL_LOG), &CarmenOptions::default()).unwrap();
+    let relations = read_relations(Path::new(INTEL_RELATIONS)).unwrap();
+    // The README says so; with a window of zero seconds nothing may go missing.
+    let report = evaluate_relations(&log.laser_odometry(), &relations, 0.0).unwrap();
+    assert_eq!((report.n, report.missing), (2984, 0));
+}
