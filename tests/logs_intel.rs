@@ -95,3 +95,36 @@ fn relation_timestamps_are_laser_timestamps() {
     let report = evaluate_relations(&log.laser_odometry(), &relations, 0.0).unwrap();
     assert_eq!((report.n, report.missing), (2984, 0));
 }
+
+const MIT_LOG: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/data/mit-csail/mit-csail.clf.bz2"
+);
+
+#[test]
+fn mit_csail_log_has_361_beams_and_odometry_only_in_laser_lines() {
+    if !present(MIT_LOG) {
+        return;
+    }
+    let log = read_carmen(Path::new(MIT_LOG), &CarmenOptions::default()).unwrap();
+    println!("{}", log.report());
+    assert_eq!(log.records.len(), 1988);
+    assert!(log.odometry.is_empty());
+    assert!(log.records.iter().all(|r| r.scan.beams() == 361));
+    // 361 beams spread evenly over 180°: −90° … +90° in 0.5° steps.
+    let g = log.records[0].scan.geometry;
+    assert!((g.angle(360) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    assert!((g.angle_increment - 0.5f64.to_radians()).abs() < 1e-12);
+    assert!(
+        log.records
+            .windows(2)
+            .all(|w| w[0].timestamp() <= w[1].timestamp())
+    );
+    let moved = log
+        .records
+        .last()
+        .unwrap()
+        .odometry
+        .distance(&log.records[0].odometry);
+    assert!(moved > 1.0, "{moved}");
+}

@@ -23,6 +23,13 @@
 //! the 180- and 360-beam SICK layouts that drop the last beam of the sweep, a step of fov/n
 //! (1° and 0.5° over 180°); any other beam count spreads evenly over the fov (step
 //! fov/(n−1)). See [`flaser_geometry`].
+//!
+//! `PARAM`s hold for the whole log wherever they appear (the last value of a name wins):
+//! `laser_front_laser_fov` (degrees), `robot_front_laser_max` (m), `robot_frontlaser_offset`,
+//! `robot_frontlaser_side_offset` (m) and `robot_frontlaser_angular_offset` (rad) shape the
+//! `FLASER` scans; [`CarmenOptions`] set explicitly override them. Unknown record types
+//! (`RLASER`, `SYNC`, `RAWLASER1`, …) are skipped and counted in
+//! [`CarmenLog::unknown_types`]; [`CarmenLog::report`] lists them.
 
 use super::{LogError, next_line, parse_f64};
 use qicp_core::{BeamGeometry, Pose2, Record, Scan};
