@@ -1,0 +1,120 @@
+//! Bad configurations are refused with a message naming the key; shipped ones load.
+
+use qicp_sim::{ConfigError, SimConfig, Simulation};
+use std::path::PathBuf;
+
+fn refused(text: &str) -> String {
+    match SimConfig::from_toml_str(text) {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn invalid_key(text: &str) -> &'static str {
+    match SimConfig::from_toml_str(text) {
+        Err(ConfigError::Invalid { key, .. }) => key,
+        other => panic!("expected an invalid value, got {other:?}"),
+    }
+}
+
+#[test]
+fn unknown_world_kind_is_refused_naming_the_kind() {
+    let msg = refused("[world]\nkind = \"forest\"\n");
+    assert!(msg.contains("kind") && msg.contains("forest"), "{msg}");
+    assert!(msg.contains("park") && msg.contains("corridor"), "{msg}");
+}
+
+#[test]
+fn zero_beams_are_refused() {
+    assert_eq!(invalid_key("[laser]\nbeams = 0\n"), "laser.beams");
+    let msg = refused("[laser]\nbeams = 0\n");
+    assert!(msg.contains("laser.beams"), "{msg}");
+}
+
+#[test]
+fn negative_ranges_are_refused() {
+    assert_eq!(
+        invalid_key("[laser]\nmax_range = -5.0\n"),
+        "laser.max_range"
+    );
+    assert_eq!(
+        invalid_key("[laser]\nmin_range = -0.1\n"),
+        "laser.min_range"
+    );
+    assert_eq!(
+        invalid_key("[laser]\nrange_sigma = -0.1\n"),
+        "laser.range_sigma"
+    );
+}
+
+#[test]
+fn unknown_keys_are_refused_by_name() {
+    for (text, key) in [
+        ("[laser]\nbeam_count = 181\n", "beam_count"),
+        ("[robot]\ncolour = \"red\"\n", "colour"),
+        ("[world.park]\nflowers = 3\n", "flowers"),
+        ("[weather]\nrain = true\n", "weather"),
+        (
+            "[world]\nkind = \"custom\"\n[[world.obstacles]]\nkind = \"circle\"\ncenter = [1.0, 2.0]\nradius = 0.5\nheight = 2.0\n[drive]\nwaypoints = [[0.0, 0.0], [1.0, 0.0]]\n",
+            "height",
+        ),
+    ] {
+        let msg = refused(text);
+        assert!(msg.contains(key), "`{key}` not named in: {msg}");
+    }
+}
+
+#[test]
+fn parameters_of_another_world_kind_are_refused() {
+    assert_eq!(
+        invalid_key("[world]\nkind = \"park\"\n[world.corridor]\ncorridor_width = 2.0\n"),
+        "world.corridor"
+    );
+    assert_eq!(
+        invalid_key("[world]\nkind = \"custom\"\n"),
+        "drive.waypoints"
+    );
+}
+
+#[test]
+fn other_impossible_values_name_their_key() {
+    assert_eq!(
+        invalid_key("[robot]\nground_friction = 0.0\n"),
+        "robot.ground_friction"
+    );
+    assert_eq!(invalid_key("[laser]\nfov_deg = 400.0\n"), "laser.fov_deg");
+    assert_eq!(invalid_key("[laser]\nrate_hz = 0.0\n"), "laser.rate_hz");
+    assert_eq!(invalid_key("[drive]\nspeed = 5.0\n"), "drive.speed");
+    assert_eq!(invalid_key("[drive]\nmax_scans = 0\n"), "drive.max_scans");
+    assert_eq!(
+        invalid_key("[world]\nkind = \"corridor\"\n[world.corridor]\nzigzag_amplitude = 1.5\n"),
+        "world.corridor.zigzag_amplitude"
+    );
+}
+
+#[test]
+fn simulation_refuses_an_invalid_config_without_panicking() {
+    let mut cfg = SimConfig::default();
+    cfg.laser.beams = 0;
+    assert!(Simulation::new(cfg).is_err());
+}
+
+#[test]
+fn defaults_and_shipped_configs_load_and_round_trip() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs/worlds");
+    let mut found = 0;
+    for entry in std::fs::read_dir(&dir).expect("configs/worlds") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let cfg = SimConfig::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let back = SimConfig::from_toml_str(&cfg.to_toml_string().expect("toml"))
+                .expect("effective config reloads");
+            assert_eq!(back, cfg, "{}", path.display());
+            found += 1;
+        }
+    }
+    assert!(found >= 2);
+    let d = SimConfig::default();
+    d.validate().expect("defaults are valid");
+    assert_eq!(SimConfig::from_toml_str("").expect("empty"), d);
+}
