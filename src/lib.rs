@@ -7,4 +7,6 @@
 pub mod bench;
 pub mod eval;
 pub mod logs;
+pub mod match_cmd;
+pub mod matching;
 pub mod sim_cmd;

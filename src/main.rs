@@ -1,6 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-use qicp::{bench, eval, sim_cmd};
+use qicp::{bench, eval, match_cmd, sim_cmd};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -21,6 +21,9 @@ enum Command {
     /// Evaluate trajectories.
     #[command(subcommand)]
     Eval(eval::EvalCommand),
+    /// Match every scan of a CARMEN log with one matcher; write trajectory, per-scan figures
+    /// and a summary.
+    Match(match_cmd::MatchArgs),
     /// Simulate a drive and write a CARMEN log, ground truth and odometry.
     Sim(sim_cmd::SimArgs),
 }
@@ -30,6 +33,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Bench(c) => bench::run(c),
         Command::Eval(c) => eval::run(c),
+        Command::Match(a) => match_cmd::run(a),
         Command::Sim(a) => sim_cmd::run(a),
     }
 }

@@ -1,0 +1,231 @@
+//! Running a matcher over a sequence of records: the loop behind `qicp match`, `qicp run`
+//! and the bridge's matcher process.
+
+use crate::logs::tum::{Stamped, write_tum};
+use anyhow::{Context, Result};
+use qicp_core::{Fallback, Record};
+use qicp_matchers::{Estimate, MatcherConfig, Odometry};
+use serde::Serialize;
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+/// Per-scan figures, one row of `matches.csv`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ScanRow {
+    /// Record timestamp (s).
+    pub timestamp: f64,
+    /// Iterations the matcher ran.
+    pub iterations: u32,
+    /// Correspondences in the final iteration.
+    pub correspondences: usize,
+    /// Residual correlation distance (mm); NaN for a fallback.
+    pub residual_mm: f64,
+    /// Matching certainty sqrt(σx² + σy²) (m); NaN for a fallback.
+    pub certainty: f64,
+    /// Wall time of this scan (ms).
+    pub ms: f64,
+    /// Whether the scan entered the reference.
+    pub inserted: bool,
+    /// Why the scan fell back to odometry, if it did.
+    #[serde(skip)]
+    pub fallback: Option<Fallback>,
+}
+
+/// Summary of one matcher over one drive (`summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MatchSummary {
+    /// Registry name of the matcher.
+    pub matcher: String,
+    /// Records processed.
+    pub scans: usize,
+    /// Median wall time per scan (ms).
+    pub ms_per_scan_median: f64,
+    /// 99th percentile of the wall time per scan (ms).
+    pub ms_per_scan_p99: f64,
+    /// Total wall time of matching (s).
+    pub wall_seconds: f64,
+    /// Points in the reference at the end (the whole map for boosted matchers).
+    pub map_points: usize,
+    /// Mean residual correlation distance over matched scans (mm).
+    pub residual_mean_mm: f64,
+    /// Mean matching certainty over matched scans (m).
+    pub certainty_mean: f64,
+    /// Scans that fell back to odometry (the first scan, with nothing to match, included).
+    pub fallbacks: usize,
+    /// Fallbacks by reason.
+    pub fallback_reasons: std::collections::BTreeMap<String, usize>,
+    /// Scans that entered the reference.
+    pub inserted: usize,
+}
+
+/// A matcher's whole run over a drive.
+#[derive(Debug)]
+pub struct MatchRun {
+    /// Robot pose at every record's timestamp.
+    pub trajectory: Vec<Stamped>,
+    /// Per-scan figures.
+    pub rows: Vec<ScanRow>,
+    /// Totals.
+    pub summary: MatchSummary,
+    /// The pipeline after the run (its map, for pictures).
+    pub odometry: Box<dyn Odometry>,
+}
+
+/// The `q`-quantile of `values` (nearest rank); NaN for none.
+#[must_use]
+pub fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
+    v[rank - 1]
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for v in values.filter(|v| v.is_finite()) {
+        sum += v;
+        n += 1;
+    }
+    if n == 0 { f64::NAN } else { sum / n as f64 }
+}
+
+/// A progress bar on a terminal, nothing otherwise (CI, pipes).
+#[must_use]
+pub fn progress_bar(len: usize, label: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len as u64);
+    let style = indicatif::ProgressStyle::with_template(
+        "{prefix:>8} [{bar:30}] {pos}/{len} scans {per_sec} eta {eta}",
+    )
+    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+    .progress_chars("=> ");
+    bar.set_style(style);
+    bar.set_prefix(label.to_string());
+    bar
+}
+
+/// Runs the matcher `config` describes over `records` (in time order).
+pub fn run_matcher(
+    records: &[Record],
+    config: &MatcherConfig,
+    show_progress: bool,
+) -> Result<MatchRun> {
+    let mut odometry = config.build()?;
+    let bar = if show_progress {
+        progress_bar(records.len(), config.kind.name())
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut trajectory = Vec::with_capacity(records.len());
+    let mut rows = Vec::with_capacity(records.len());
+    let start = Instant::now();
+    for record in records {
+        let t0 = Instant::now();
+        let Estimate {
+            pose,
+            result,
+            inserted,
+        } = odometry.process(record);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let matched = result.fallback.is_none();
+        trajectory.push((record.timestamp(), pose));
+        rows.push(ScanRow {
+            timestamp: record.timestamp(),
+            iterations: result.iterations,
+            correspondences: result.correspondences,
+            residual_mm: if matched {
+                result.residual * 1e3
+            } else {
+                f64::NAN
+            },
+            certainty: if matched {
+                result.certainty()
+            } else {
+                f64::NAN
+            },
+            ms,
+            inserted,
+            fallback: result.fallback,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let wall_seconds = start.elapsed().as_secs_f64();
+    let times: Vec<f64> = rows.iter().map(|r| r.ms).collect();
+    let mut reasons = std::collections::BTreeMap::new();
+    for r in &rows {
+        if let Some(f) = r.fallback {
+            let key = match f {
+                Fallback::TooFewPoints { .. } => "too_few_points",
+                Fallback::TooFewCorrespondences { .. } => "too_few_correspondences",
+                Fallback::EmptyReference => "empty_reference",
+                Fallback::Degenerate => "degenerate",
+            };
+            *reasons.entry(key.to_string()).or_insert(0) += 1;
+        }
+    }
+    let summary = MatchSummary {
+        matcher: config.kind.name().to_string(),
+        scans: records.len(),
+        ms_per_scan_median: quantile(&times, 0.5),
+        ms_per_scan_p99: quantile(&times, 0.99),
+        wall_seconds,
+        map_points: odometry.reference_points().len(),
+        residual_mean_mm: mean(rows.iter().map(|r| r.residual_mm)),
+        certainty_mean: mean(rows.iter().map(|r| r.certainty)),
+        fallbacks: rows.iter().filter(|r| r.fallback.is_some()).count(),
+        fallback_reasons: reasons,
+        inserted: rows.iter().filter(|r| r.inserted).count(),
+    };
+    Ok(MatchRun {
+        trajectory,
+        rows,
+        summary,
+        odometry,
+    })
+}
+
+/// Writes `matches.csv`.
+pub fn write_rows<W: Write>(mut w: W, rows: &[ScanRow]) -> std::io::Result<()> {
+    writeln!(
+        w,
+        "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback"
+    )?;
+    for r in rows {
+        writeln!(
+            w,
+            "{},{},{},{:.4},{:.6e},{:.4},{},{}",
+            r.timestamp,
+            r.iterations,
+            r.correspondences,
+            r.residual_mm,
+            r.certainty,
+            r.ms,
+            u8::from(r.inserted),
+            r.fallback.map(|f| f.to_string()).unwrap_or_default()
+        )?;
+    }
+    Ok(())
+}
+
+/// Writes `trajectory.tum`, `matches.csv` and `config.toml` of a run into `dir`.
+pub fn write_run(dir: &Path, run: &MatchRun, config: &MatcherConfig) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let create = |name: &str| -> Result<std::io::BufWriter<std::fs::File>> {
+        let path = dir.join(name);
+        Ok(std::io::BufWriter::new(
+            std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?,
+        ))
+    };
+    write_tum(create("trajectory.tum")?, &run.trajectory).context("writing trajectory.tum")?;
+    write_rows(create("matches.csv")?, &run.rows).context("writing matches.csv")?;
+    std::fs::write(dir.join("config.toml"), config.to_toml()).context("writing config.toml")?;
+    Ok(())
+}
