@@ -8,7 +8,7 @@
 //! kind = "park"          # "park" | "corridor" | "custom"
 //! seed = 7               # procedural layout seed
 //! [world.park]           # only with kind = "park" (all keys optional)
-//! trees = 16
+//! trees = 12
 //! [robot]
 //! ground_friction = 0.3
 //! [laser]
@@ -122,13 +122,13 @@ impl Default for WorldConfig {
 pub struct ParkConfig {
     /// Width and height of the park (m). Default 80 × 40.
     pub size: [f64; 2],
-    /// Number of trees. Default 16.
+    /// Number of trees. Default 12.
     pub trees: usize,
     /// Smallest and largest trunk radius (m). Default 0.15–0.5.
     pub tree_radius: [f64; 2],
-    /// Number of rocks (round, 0.3–0.8 m). Default 4.
+    /// Number of rocks (round, 0.3–0.8 m). Default 3.
     pub rocks: usize,
-    /// Number of benches (1.6 × 0.5 m boxes). Default 3.
+    /// Number of benches (1.6 × 0.5 m boxes). Default 2.
     pub benches: usize,
     /// Smallest free distance between the route and any obstacle surface (m). Default 2.5.
     pub route_clearance: f64,
@@ -142,10 +142,10 @@ impl Default for ParkConfig {
     fn default() -> Self {
         Self {
             size: [80.0, 40.0],
-            trees: 16,
+            trees: 12,
             tree_radius: [0.15, 0.5],
-            rocks: 4,
-            benches: 3,
+            rocks: 3,
+            benches: 2,
             route_clearance: 2.5,
             route_margin: 6.0,
             route_wiggle: 3.0,

@@ -7,7 +7,7 @@
 use qicp_sim::{SimConfig, Simulation, digest};
 use std::path::PathBuf;
 
-const PARK_30_SCANS: u64 = 0xc4bb_4807_2587_1f50;
+const PARK_30_SCANS: u64 = 0x37ff_6f69_f6bb_521c;
 const CORRIDOR_40_SCANS: u64 = 0x5645_2517_c265_5b4d;
 
 fn short(name: &str, scans: usize) -> SimConfig {
