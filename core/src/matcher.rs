@@ -3,6 +3,7 @@
 use crate::index::SpatialIndex;
 use crate::reference::Reference;
 use crate::{MatchResult, Pose2, Scan};
+use nalgebra::Matrix3;
 
 /// Estimates where a scan was taken, relative to a reference.
 ///
@@ -12,11 +13,26 @@ pub trait ScanMatcher {
     /// Short name, e.g. `"wsm"`.
     fn name(&self) -> &'static str;
 
-    /// The pose of `scan` in the frame of `reference`, starting from `guess`.
+    /// The pose of `scan` in the frame of `reference`, starting from `guess`. `prior`, when
+    /// given, is the information matrix (inverse covariance, in the reference frame's x, y, θ)
+    /// of the guess itself, e.g. from an odometry motion model; matchers that weigh their
+    /// pairs add it to their least squares, the others may ignore it.
+    fn match_with_prior<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan: &Scan,
+        guess: Pose2,
+        prior: Option<Matrix3<f64>>,
+    ) -> MatchResult;
+
+    /// The pose of `scan` in the frame of `reference`, starting from `guess`, trusting the
+    /// scan alone.
     fn match_scan<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,
         scan: &Scan,
         guess: Pose2,
-    ) -> MatchResult;
+    ) -> MatchResult {
+        self.match_with_prior(reference, scan, guess, None)
+    }
 }

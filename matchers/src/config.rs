@@ -15,7 +15,7 @@
 
 use crate::icp::IcpParams;
 use crate::idc::{Idc, IdcParams};
-use crate::pipeline::{Odometry, Pipeline, Policy, Relevance};
+use crate::pipeline::{MotionModel, Odometry, Pipeline, Policy, Relevance};
 use crate::wsm::{Wsm, WsmParams};
 use qicp_core::{KdTree, MutualNearest, QuadTree};
 use serde::{Deserialize, Serialize};
@@ -154,6 +154,9 @@ pub struct MatcherConfig {
     /// Which scans enter the reference.
     #[serde(default)]
     pub relevance: Relevance,
+    /// How far odometry is trusted (the prior of weighted matchers).
+    #[serde(default)]
+    pub motion: MotionModel,
 }
 
 impl MatcherConfig {
@@ -166,6 +169,7 @@ impl MatcherConfig {
             idc: None,
             wsm: None,
             relevance: Relevance::default(),
+            motion: MotionModel::default(),
         };
         c.fill_defaults();
         c
@@ -213,6 +217,7 @@ impl MatcherConfig {
             p.validate()?;
         }
         self.relevance.validate()?;
+        self.motion.validate()?;
         Ok(())
     }
 
@@ -240,49 +245,59 @@ impl MatcherConfig {
         let incremental = Policy::Incremental(c.relevance);
         let noise = wsm.noise();
         let name = c.kind.name();
+        let motion = c.motion;
+        // One line per kind: the matcher, its reference index and its policy.
+        fn boxed<M, I>(p: Pipeline<M, I>, motion: MotionModel) -> Box<dyn Odometry>
+        where
+            Pipeline<M, I>: Odometry + 'static,
+            M: qicp_core::ScanMatcher,
+            I: qicp_core::SpatialIndex,
+        {
+            Box::new(p.with_motion_model(motion))
+        }
         Ok(match c.kind {
-            MatcherKind::Idc => Box::new(Pipeline::new(
-                name,
-                Idc::<MutualNearest<QuadTree>>::new(icp, idc),
-                QuadTree::default(),
-                incremental,
-                noise,
-            )),
-            MatcherKind::Wsm => Box::new(Pipeline::new(
-                name,
-                Wsm::<MutualNearest<QuadTree>>::new(icp, wsm),
-                QuadTree::default(),
-                incremental,
-                noise,
-            )),
-            MatcherKind::QIdc => Box::new(QIdc::new(
-                name,
-                Idc::new(icp, idc),
-                QuadTree::default(),
-                boosted,
-                noise,
-            )),
-            MatcherKind::QWsm => Box::new(QWsm::new(
-                name,
-                Wsm::new(icp, wsm),
-                QuadTree::default(),
-                boosted,
-                noise,
-            )),
-            MatcherKind::KdIdc => Box::new(KdIdc::new(
-                name,
-                Idc::new(icp, idc),
-                KdTree::default(),
-                boosted,
-                noise,
-            )),
-            MatcherKind::KdWsm => Box::new(KdWsm::new(
-                name,
-                Wsm::new(icp, wsm),
-                KdTree::default(),
-                boosted,
-                noise,
-            )),
+            MatcherKind::Idc => {
+                let m = Idc::<MutualNearest<QuadTree>>::new(icp, idc);
+                boxed(
+                    Pipeline::new(name, m, QuadTree::default(), incremental, noise),
+                    motion,
+                )
+            }
+            MatcherKind::Wsm => {
+                let m = Wsm::<MutualNearest<QuadTree>>::new(icp, wsm);
+                boxed(
+                    Pipeline::new(name, m, QuadTree::default(), incremental, noise),
+                    motion,
+                )
+            }
+            MatcherKind::QIdc => boxed(
+                QIdc::new(
+                    name,
+                    Idc::new(icp, idc),
+                    QuadTree::default(),
+                    boosted,
+                    noise,
+                ),
+                motion,
+            ),
+            MatcherKind::QWsm => boxed(
+                QWsm::new(
+                    name,
+                    Wsm::new(icp, wsm),
+                    QuadTree::default(),
+                    boosted,
+                    noise,
+                ),
+                motion,
+            ),
+            MatcherKind::KdIdc => boxed(
+                KdIdc::new(name, Idc::new(icp, idc), KdTree::default(), boosted, noise),
+                motion,
+            ),
+            MatcherKind::KdWsm => boxed(
+                KdWsm::new(name, Wsm::new(icp, wsm), KdTree::default(), boosted, noise),
+                motion,
+            ),
         })
     }
 }

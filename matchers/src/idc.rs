@@ -4,8 +4,8 @@ use crate::ConfigError;
 use crate::icp::{IcpParams, move_points, positive, residual, trim};
 use crate::lsq::{NormalEquations, align_points};
 use qicp_core::{
-    ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix2, Pair,
-    Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex,
+    ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix2, Matrix3,
+    Pair, Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex,
 };
 use serde::{Deserialize, Serialize};
 
@@ -126,11 +126,13 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         "idc"
     }
 
-    fn match_scan<I: SpatialIndex>(
+    /// IDC's least squares is unweighted: the prior is not used.
+    fn match_with_prior<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,
         scan: &Scan,
         guess: Pose2,
+        _prior: Option<Matrix3<f64>>,
     ) -> MatchResult {
         let local = scan.points();
         if local.len() < self.icp.min_correspondences {

@@ -21,5 +21,5 @@ pub mod wsm;
 pub use config::{ConfigError, KdIdc, KdWsm, MatcherConfig, MatcherKind, QIdc, QWsm};
 pub use icp::IcpParams;
 pub use idc::{Idc, IdcParams};
-pub use pipeline::{Estimate, Odometry, Pipeline, Policy, Relevance};
+pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance};
 pub use wsm::{Wsm, WsmParams};

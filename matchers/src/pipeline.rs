@@ -4,7 +4,8 @@
 use crate::ConfigError;
 use crate::icp::non_negative;
 use qicp_core::{
-    LaserNoise, MatchResult, Point2, Pose2, Record, Reference, ScanMatcher, SpatialIndex,
+    Fallback, LaserNoise, MatchResult, Matrix3, Point2, Pose2, Record, Reference, ScanMatcher,
+    SpatialIndex,
 };
 use serde::{Deserialize, Serialize};
 
@@ -47,6 +48,78 @@ impl Relevance {
     }
 }
 
+/// How far odometry is trusted (TOML section `[matcher.motion]`): the standard deviations
+/// of an odometry motion of length d (m) turning by φ (rad). Matchers that weigh their pairs
+/// (WSM) use it as a prior, so a scan that constrains only some directions (one tree in view,
+/// a featureless corridor) keeps odometry's estimate in the others.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MotionModel {
+    /// Use the prior at all. Default true.
+    pub enabled: bool,
+    /// σ of x and y: `sigma_xy_min + sigma_xy_per_m·d` (m). Default 0.05.
+    pub sigma_xy_min: f64,
+    /// Default 0.2 (m per m).
+    pub sigma_xy_per_m: f64,
+    /// σ of θ: `sigma_theta_min_deg + sigma_theta_per_m_deg·d + sigma_theta_per_rad·|φ|` (deg).
+    /// Default 1.
+    pub sigma_theta_min_deg: f64,
+    /// Default 2 (deg per m).
+    pub sigma_theta_per_m_deg: f64,
+    /// Default 0.2 (rad per rad).
+    pub sigma_theta_per_rad: f64,
+}
+
+impl Default for MotionModel {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            sigma_xy_min: 0.05,
+            sigma_xy_per_m: 0.2,
+            sigma_theta_min_deg: 1.0,
+            sigma_theta_per_m_deg: 2.0,
+            sigma_theta_per_rad: 0.2,
+        }
+    }
+}
+
+impl MotionModel {
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        crate::icp::positive("matcher.motion.sigma_xy_min", self.sigma_xy_min)?;
+        non_negative("matcher.motion.sigma_xy_per_m", self.sigma_xy_per_m)?;
+        crate::icp::positive(
+            "matcher.motion.sigma_theta_min_deg",
+            self.sigma_theta_min_deg,
+        )?;
+        non_negative(
+            "matcher.motion.sigma_theta_per_m_deg",
+            self.sigma_theta_per_m_deg,
+        )?;
+        non_negative(
+            "matcher.motion.sigma_theta_per_rad",
+            self.sigma_theta_per_rad,
+        )
+    }
+
+    /// Information matrix of an odometry motion, or `None` when disabled.
+    #[must_use]
+    pub fn information(&self, motion: &Pose2) -> Option<Matrix3<f64>> {
+        if !self.enabled {
+            return None;
+        }
+        let d = motion.x.hypot(motion.y);
+        let sxy = self.sigma_xy_min + self.sigma_xy_per_m * d;
+        let sth = (self.sigma_theta_min_deg + self.sigma_theta_per_m_deg * d).to_radians()
+            + self.sigma_theta_per_rad * motion.theta.abs();
+        Some(Matrix3::from_diagonal(&nalgebra::Vector3::new(
+            1.0 / (sxy * sxy),
+            1.0 / (sxy * sxy),
+            1.0 / (sth * sth),
+        )))
+    }
+}
+
 /// What a pipeline says about one record.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Estimate {
@@ -86,6 +159,7 @@ pub struct Pipeline<M, I> {
     reference: Reference<I>,
     policy: Policy,
     noise: LaserNoise,
+    motion: MotionModel,
     /// Pose of the reference frame in the world: the previous scan's laser pose
     /// (incremental), the identity (boosted).
     reference_frame: Pose2,
@@ -110,10 +184,21 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             reference: Reference::new(index),
             policy,
             noise,
+            motion: MotionModel {
+                enabled: false,
+                ..MotionModel::default()
+            },
             reference_frame: Pose2::IDENTITY,
             last: None,
             last_inserted: None,
         }
+    }
+
+    /// Uses `motion` as the prior of every match.
+    #[must_use]
+    pub fn with_motion_model(mut self, motion: MotionModel) -> Self {
+        self.motion = motion;
+        self
     }
 
     /// The reference (map or previous scan).
@@ -142,9 +227,16 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     .is_ok()
             }
             Policy::Boosted(_) => {
-                // A scan that fell back to odometry is not trusted enough to enter the map
-                // (except the first, which founds it).
-                if !(enough && relevant && (matched || self.reference.is_empty())) {
+                // A relevant scan enters the map even when it could not be matched for lack of
+                // correspondences: it sees territory the map does not hold yet, and its
+                // odometry pose is the best estimate there is. Without it the map would stop
+                // growing and every later scan would fall back too.
+                let trusted = matched
+                    || matches!(
+                        result.fallback,
+                        Some(Fallback::TooFewCorrespondences { .. } | Fallback::EmptyReference)
+                    );
+                if !(enough && relevant && trusted) {
                     return false;
                 }
                 // paper Alg. 1: insert all scan points of s_global into Q_t
@@ -172,16 +264,19 @@ where
     fn process(&mut self, record: &Record) -> Estimate {
         let offset = record.laser_offset;
         // The odometry motion since the previous record, as a motion of the laser.
-        let predicted = match self.last {
-            None => record.odometry * offset,
+        let (predicted, step) = match self.last {
+            None => (record.odometry * offset, Pose2::IDENTITY),
             Some((odom, laser)) => {
-                laser * (offset.inverse() * odom.between(&record.odometry) * offset)
+                let step = offset.inverse() * odom.between(&record.odometry) * offset;
+                (laser * step, step)
             }
         };
         let guess = self.reference_frame.between(&predicted);
+        // The prior's x-y block is isotropic, so it holds in the reference frame unrotated.
+        let prior = self.motion.information(&step);
         let result = self
             .matcher
-            .match_scan(&self.reference, &record.scan, guess);
+            .match_with_prior(&self.reference, &record.scan, guess, prior);
         let laser = self.reference_frame * result.pose;
         let inserted = self.update_reference(record, &laser, &result);
         self.last = Some((record.odometry, laser));

@@ -90,6 +90,18 @@ impl WsmParams {
     }
 }
 
+/// Adds the guess as a Gaussian prior: cost (guess − pose)ᵀ Λ (guess − pose).
+fn add_prior(ne: &mut NormalEquations, prior: Option<&Matrix3<f64>>, guess: &Pose2, pose: &Pose2) {
+    let Some(lambda) = prior else { return };
+    let r = qicp_core::Vector3::new(
+        guess.x - pose.x,
+        guess.y - pose.y,
+        qicp_core::normalize_angle(guess.theta - pose.theta),
+    );
+    ne.h += lambda;
+    ne.g += lambda * r;
+}
+
 /// WSM: every pair is weighted by the inverse of its combined covariance (measurement noise of
 /// both points plus correspondence error) and the weighted least squares is solved by
 /// Gauss–Newton; the inverse information matrix is the pose covariance.
@@ -158,11 +170,12 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
         "wsm"
     }
 
-    fn match_scan<I: SpatialIndex>(
+    fn match_with_prior<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,
         scan: &Scan,
         guess: Pose2,
+        prior: Option<Matrix3<f64>>,
     ) -> MatchResult {
         let local = scan.points();
         if local.len() < self.icp.min_correspondences {
@@ -205,10 +218,9 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
                 }
                 break;
             }
-            let Some(step) = self
-                .normal_equations(reference, local, &scan_info, &pose)
-                .solve()
-            else {
+            let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
+            add_prior(&mut ne, prior.as_ref(), &guess, &pose);
+            let Some(step) = ne.solve() else {
                 return MatchResult::fallback(guess, Fallback::Degenerate);
             };
             let next = apply_step(&pose, &step);
@@ -229,9 +241,9 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
             max_dist: self.icp.max_dist_end,
         };
         self.metric.pair(reference.index(), &query, &mut self.pairs);
-        let h = self
-            .normal_equations(reference, local, &scan_info, &pose)
-            .information();
+        let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
+        add_prior(&mut ne, prior.as_ref(), &guess, &pose);
+        let h = ne.information();
         let covariance = h
             .try_inverse()
             .filter(|c| c.iter().all(|v| v.is_finite()))
