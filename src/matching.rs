@@ -43,7 +43,7 @@ pub struct MatchSummary {
     pub ms_per_scan_median: f64,
     /// 99th percentile of the wall time per scan (ms).
     pub ms_per_scan_p99: f64,
-    /// Total wall time of matching (s).
+    /// Total time spent matching (s), the sum over scans.
     pub wall_seconds: f64,
     /// Points in the reference at the end (the whole map for boosted matchers).
     pub map_points: usize,
@@ -111,32 +111,43 @@ pub fn progress_bar(len: usize, label: &str) -> indicatif::ProgressBar {
     bar
 }
 
-/// Runs the matcher `config` describes over `records` (in time order).
-pub fn run_matcher(
-    records: &[Record],
-    config: &MatcherConfig,
-    show_progress: bool,
-) -> Result<MatchRun> {
-    let mut odometry = config.build()?;
-    let bar = if show_progress {
-        progress_bar(records.len(), config.kind.name())
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    let mut trajectory = Vec::with_capacity(records.len());
-    let mut rows = Vec::with_capacity(records.len());
-    let start = Instant::now();
-    for record in records {
+/// A matcher consuming records one at a time (in time order), keeping the trajectory and the
+/// per-scan figures: the loop behind every command, in-process or fed by the bridge.
+#[derive(Debug)]
+pub struct Matching {
+    kind: String,
+    odometry: Box<dyn Odometry>,
+    trajectory: Vec<Stamped>,
+    rows: Vec<ScanRow>,
+    busy: std::time::Duration,
+}
+
+impl Matching {
+    /// A fresh run of the matcher `config` describes.
+    pub fn new(config: &MatcherConfig) -> Result<Self> {
+        Ok(Self {
+            kind: config.kind.name().to_string(),
+            odometry: config.build()?,
+            trajectory: Vec::new(),
+            rows: Vec::new(),
+            busy: std::time::Duration::ZERO,
+        })
+    }
+
+    /// Matches one record and returns the estimate.
+    pub fn push(&mut self, record: &Record) -> Estimate {
         let t0 = Instant::now();
+        let estimate = self.odometry.process(record);
+        let elapsed = t0.elapsed();
+        self.busy += elapsed;
         let Estimate {
             pose,
             result,
             inserted,
-        } = odometry.process(record);
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        } = estimate;
         let matched = result.fallback.is_none();
-        trajectory.push((record.timestamp(), pose));
-        rows.push(ScanRow {
+        self.trajectory.push((record.timestamp(), pose));
+        self.rows.push(ScanRow {
             timestamp: record.timestamp(),
             iterations: result.iterations,
             correspondences: result.correspondences,
@@ -150,18 +161,20 @@ pub fn run_matcher(
             } else {
                 f64::NAN
             },
-            ms,
+            ms: elapsed.as_secs_f64() * 1e3,
             inserted,
             fallback: result.fallback,
         });
-        bar.inc(1);
+        estimate
     }
-    bar.finish_and_clear();
-    let wall_seconds = start.elapsed().as_secs_f64();
-    let times: Vec<f64> = rows.iter().map(|r| r.ms).collect();
-    let mut reasons = std::collections::BTreeMap::new();
-    for r in &rows {
-        if let Some(f) = r.fallback {
+
+    /// Ends the run: totals and the pipeline (with its map).
+    #[must_use]
+    pub fn finish(self) -> MatchRun {
+        let rows = self.rows;
+        let times: Vec<f64> = rows.iter().map(|r| r.ms).collect();
+        let mut reasons = std::collections::BTreeMap::new();
+        for f in rows.iter().filter_map(|r| r.fallback) {
             let key = match f {
                 Fallback::TooFewPoints { .. } => "too_few_points",
                 Fallback::TooFewCorrespondences { .. } => "too_few_correspondences",
@@ -170,26 +183,46 @@ pub fn run_matcher(
             };
             *reasons.entry(key.to_string()).or_insert(0) += 1;
         }
+        let summary = MatchSummary {
+            matcher: self.kind,
+            scans: rows.len(),
+            ms_per_scan_median: quantile(&times, 0.5),
+            ms_per_scan_p99: quantile(&times, 0.99),
+            wall_seconds: self.busy.as_secs_f64(),
+            map_points: self.odometry.reference_points().len(),
+            residual_mean_mm: mean(rows.iter().map(|r| r.residual_mm)),
+            certainty_mean: mean(rows.iter().map(|r| r.certainty)),
+            fallbacks: rows.iter().filter(|r| r.fallback.is_some()).count(),
+            fallback_reasons: reasons,
+            inserted: rows.iter().filter(|r| r.inserted).count(),
+        };
+        MatchRun {
+            trajectory: self.trajectory,
+            rows,
+            summary,
+            odometry: self.odometry,
+        }
     }
-    let summary = MatchSummary {
-        matcher: config.kind.name().to_string(),
-        scans: records.len(),
-        ms_per_scan_median: quantile(&times, 0.5),
-        ms_per_scan_p99: quantile(&times, 0.99),
-        wall_seconds,
-        map_points: odometry.reference_points().len(),
-        residual_mean_mm: mean(rows.iter().map(|r| r.residual_mm)),
-        certainty_mean: mean(rows.iter().map(|r| r.certainty)),
-        fallbacks: rows.iter().filter(|r| r.fallback.is_some()).count(),
-        fallback_reasons: reasons,
-        inserted: rows.iter().filter(|r| r.inserted).count(),
+}
+
+/// Runs the matcher `config` describes over `records` (in time order).
+pub fn run_matcher(
+    records: &[Record],
+    config: &MatcherConfig,
+    show_progress: bool,
+) -> Result<MatchRun> {
+    let mut matching = Matching::new(config)?;
+    let bar = if show_progress {
+        progress_bar(records.len(), config.kind.name())
+    } else {
+        indicatif::ProgressBar::hidden()
     };
-    Ok(MatchRun {
-        trajectory,
-        rows,
-        summary,
-        odometry,
-    })
+    for record in records {
+        matching.push(record);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(matching.finish())
 }
 
 /// Writes `matches.csv`.
