@@ -50,6 +50,10 @@ pub struct NormalEquations {
     pub g: Vector3<f64>,
     /// Number of pairs added.
     pub n: usize,
+    /// Σ ξᵀ W ξ: the weighted squared residual (χ²) at the linearisation point.
+    pub chi2: f64,
+    /// Residual components behind `chi2` (2 per pair, plus any prior's).
+    pub dof: usize,
 }
 
 impl NormalEquations {
@@ -71,7 +75,20 @@ impl NormalEquations {
         self.g.x += wxi.x;
         self.g.y += wxi.y;
         self.g.z += jt.dot(&wxi);
+        self.chi2 += xi.dot(&wxi);
         self.n += 1;
+        self.dof += 2;
+    }
+
+    /// The a-posteriori variance factor χ² / (m − 3) of a fit with m residual components:
+    /// 1 when the noise model is right, below 1 when the fit is tighter than modelled.
+    #[must_use]
+    pub fn variance_factor(&self) -> f64 {
+        if self.dof > 3 {
+            self.chi2 / (self.dof - 3) as f64
+        } else {
+            1.0
+        }
     }
 
     /// The full symmetric information matrix.

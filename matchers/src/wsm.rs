@@ -91,7 +91,12 @@ impl WsmParams {
 }
 
 /// Adds the guess as a Gaussian prior: cost (guess − pose)ᵀ Λ (guess − pose).
-fn add_prior(ne: &mut NormalEquations, prior: Option<&Matrix3<f64>>, guess: &Pose2, pose: &Pose2) {
+pub(crate) fn add_prior(
+    ne: &mut NormalEquations,
+    prior: Option<&Matrix3<f64>>,
+    guess: &Pose2,
+    pose: &Pose2,
+) {
     let Some(lambda) = prior else { return };
     let r = qicp_core::Vector3::new(
         guess.x - pose.x,
@@ -100,6 +105,8 @@ fn add_prior(ne: &mut NormalEquations, prior: Option<&Matrix3<f64>>, guess: &Pos
     );
     ne.h += lambda;
     ne.g += lambda * r;
+    ne.chi2 += r.dot(&(lambda * r));
+    ne.dof += 3;
 }
 
 /// WSM: every pair is weighted by the inverse of its combined covariance (measurement noise of
@@ -140,6 +147,7 @@ impl<C: CorrespondenceMetric> Wsm<C> {
         local: &[Point2<f64>],
         scan_info: &[PointInfo],
         pose: &Pose2,
+        params: &WsmParams,
     ) -> NormalEquations {
         let refs = reference.index().points();
         let info = reference.info();
@@ -152,7 +160,7 @@ impl<C: CorrespondenceMetric> Wsm<C> {
             // P = C_a + R C_b Rᵀ + C_corr
             let cov = a.covariance
                 + rot * b.covariance * rot.transpose()
-                + self.params.correspondence_covariance(a);
+                + params.correspondence_covariance(a);
             let Some(w) = cov.try_inverse() else { continue };
             ne.add(
                 &refs[p.reference as usize],
@@ -218,7 +226,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
                 }
                 break;
             }
-            let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
+            let mut ne = self.normal_equations(reference, local, &scan_info, &pose, &self.params);
             add_prior(&mut ne, prior.as_ref(), &guess, &pose);
             let Some(step) = ne.solve() else {
                 return MatchResult::fallback(guess, Fallback::Degenerate);
@@ -241,11 +249,20 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
             max_dist: self.icp.max_dist_end,
         };
         self.metric.pair(reference.index(), &query, &mut self.pairs);
-        let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
+        // The sliding term models the pose error still to be removed; at the estimate the
+        // correspondence error is Pfister's sampling term alone.
+        let converged_model = WsmParams {
+            sigma_slide: 0.0,
+            ..self.params
+        };
+        let mut ne = self.normal_equations(reference, local, &scan_info, &pose, &converged_model);
         add_prior(&mut ne, prior.as_ref(), &guess, &pose);
-        let h = ne.information();
-        let covariance = h
+        // Pfister et al.: covariance = H⁻¹, scaled by the a-posteriori variance factor so that
+        // it also reflects how well the pairs actually fit (standard weighted least squares).
+        let covariance = ne
+            .information()
             .try_inverse()
+            .map(|c| c * ne.variance_factor())
             .filter(|c| c.iter().all(|v| v.is_finite()))
             .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0));
         MatchResult {
