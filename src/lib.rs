@@ -6,7 +6,9 @@
 
 pub mod bench;
 pub mod eval;
+pub mod experiment;
 pub mod logs;
 pub mod match_cmd;
 pub mod matching;
+pub mod plots;
 pub mod sim_cmd;

@@ -1,6 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-use qicp::{bench, eval, match_cmd, sim_cmd};
+use qicp::{bench, eval, experiment, match_cmd, sim_cmd};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -24,6 +24,9 @@ enum Command {
     /// Match every scan of a CARMEN log with one matcher; write trajectory, per-scan figures
     /// and a summary.
     Match(match_cmd::MatchArgs),
+    /// Run an experiment: simulate or load a drive, run every matcher on it, score them and
+    /// draw the paper's figures.
+    Run(experiment::RunArgs),
     /// Simulate a drive and write a CARMEN log, ground truth and odometry.
     Sim(sim_cmd::SimArgs),
 }
@@ -34,6 +37,7 @@ fn main() -> Result<()> {
         Command::Bench(c) => bench::run(c),
         Command::Eval(c) => eval::run(c),
         Command::Match(a) => match_cmd::run(a),
+        Command::Run(a) => experiment::run(a),
         Command::Sim(a) => sim_cmd::run(a),
     }
 }

@@ -1,0 +1,256 @@
+//! End to end: `qicp run CONFIG --out DIR` on a short park drive runs every matcher on the same
+//! scans and writes a complete summary, every trajectory and per-scan CSV, the effective
+//! config (which runs again as is) and every picture; bad experiment configs are refused with
+//! the key named.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const KINDS: [&str; 5] = ["idc", "q-idc", "wsm", "q-wsm", "kd-wsm"];
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("qicp-run-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn qicp_run(config: &Path, out: &Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .arg("run")
+        .arg(config)
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .expect("runs qicp")
+}
+
+fn assert_success(o: &Output) {
+    assert!(
+        o.status.success(),
+        "qicp run failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// A PNG signature, an IHDR of plausible size, and more than a blank picture's bytes.
+fn assert_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(
+        &bytes[..8],
+        b"\x89PNG\r\n\x1a\n",
+        "{} is not a PNG",
+        path.display()
+    );
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let width = u32::from_be_bytes([bytes[16], bytes[17], bytes[18], bytes[19]]);
+    let height = u32::from_be_bytes([bytes[20], bytes[21], bytes[22], bytes[23]]);
+    assert!(
+        (300..=5000).contains(&width) && (300..=5000).contains(&height),
+        "{}: {width}x{height}",
+        path.display()
+    );
+    assert!(
+        bytes.len() > 10_000,
+        "{}: only {} bytes",
+        path.display(),
+        bytes.len()
+    );
+}
+
+fn lines(path: &Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn run_writes_summary_trajectories_csvs_config_and_pictures() {
+    let out = out_dir("park");
+    let o = qicp_run(
+        &repo().join("tests/fixtures/park_short.toml"),
+        &out,
+        &["--json"],
+    );
+    assert_success(&o);
+    let printed: Value = serde_json::from_slice(&o.stdout).expect("--json prints the summary");
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("summary.json parses");
+    assert_eq!(printed["scans"], summary["scans"]);
+    assert_eq!(summary["scans"], 60);
+    assert!(
+        summary["source"]
+            .as_str()
+            .is_some_and(|s| s.starts_with("sim:"))
+    );
+    assert!(summary["wall_seconds"].as_f64().is_some_and(|s| s > 0.0));
+
+    for kind in KINDS {
+        let m = &summary["matchers"][kind];
+        for key in [
+            "ate_rmse_m",
+            "rpe_trans_per_m",
+            "final_error_m",
+            "residual_mean_mm",
+            "certainty_mean",
+            "ms_per_scan_median",
+            "ms_per_scan_p99",
+            "map_points",
+            "fallbacks",
+        ] {
+            assert!(m.get(key).is_some(), "{kind}: no `{key}` in {m}");
+        }
+        assert!(
+            m["ate_rmse_m"].as_f64().is_some_and(f64::is_finite),
+            "{kind}: {m}"
+        );
+        assert!(m.get("relations").is_none(), "no relations file was given");
+        let traj = lines(&out.join(kind).join("trajectory.tum"));
+        assert_eq!(traj.len(), 60, "{kind}: one pose per scan");
+        assert_eq!(
+            traj[0].split_whitespace().count(),
+            8,
+            "TUM: t x y z qx qy qz qw"
+        );
+        let csv = lines(&out.join(kind).join("matches.csv"));
+        assert_eq!(csv.len(), 61, "{kind}: header and one row per scan");
+        assert!(csv[0].starts_with("timestamp,"));
+        assert_png(&out.join(format!("map_{kind}.png")));
+    }
+    for key in ["ate_rmse_m", "rpe_trans_per_m", "final_error_m"] {
+        assert!(
+            summary["odometry"].get(key).is_some(),
+            "odometry: no `{key}`"
+        );
+    }
+    for pair in ["q-idc/idc", "q-wsm/wsm", "kd-wsm/wsm"] {
+        for key in ["ate", "residual", "certainty"] {
+            assert!(
+                summary["ratios"][pair].get(key).is_some(),
+                "ratios.{pair}: no `{key}`"
+            );
+        }
+    }
+    assert_eq!(lines(&out.join("groundtruth.tum")).len(), 60);
+    assert_eq!(lines(&out.join("odometry.tum")).len(), 60);
+    for picture in ["trajectories.png", "residual.png", "certainty.png"] {
+        assert_png(&out.join(picture));
+    }
+
+    // The effective config spells out every matcher and runs again to the same trajectories.
+    let effective = std::fs::read_to_string(out.join("config.toml")).expect("config.toml");
+    for kind in KINDS {
+        assert!(
+            effective.contains(&format!("[matchers.{kind}")),
+            "{effective}"
+        );
+    }
+    assert!(
+        effective.contains("max_iterations = 30"),
+        "the override is kept"
+    );
+    let again = out_dir("park-again");
+    assert_success(&qicp_run(&out.join("config.toml"), &again, &["--quiet"]));
+    for kind in KINDS {
+        assert_eq!(
+            lines(&out.join(kind).join("trajectory.tum")),
+            lines(&again.join(kind).join("trajectory.tum")),
+            "{kind}: the effective config reproduces the run"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&again);
+}
+
+#[test]
+fn run_prints_a_table_and_quiet_silences_it() {
+    let config = repo().join("tests/fixtures/park_short.toml");
+    let out = out_dir("table");
+    let o = qicp_run(&config, &out, &["--max-scans", "30"]);
+    assert_success(&o);
+    let table = String::from_utf8_lossy(&o.stdout);
+    for word in [
+        "matcher",
+        "ATE m",
+        "odometry",
+        "q-wsm",
+        "boosted / incremental",
+        "wall time",
+    ] {
+        assert!(table.contains(word), "no `{word}` in\n{table}");
+    }
+    let o = qicp_run(&config, &out, &["--max-scans", "30", "--quiet"]);
+    assert_success(&o);
+    assert!(o.stdout.is_empty(), "--quiet prints nothing");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn bad_experiment_configs_name_the_key() {
+    let dir = out_dir("bad");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let park = repo().join("configs/worlds/park.toml");
+    let park = park.display();
+    for (text, key) in [
+        (
+            format!("[source]\nsim = \"{park}\"\ncolour = 3\n"),
+            "colour",
+        ),
+        (
+            format!("[source]\nsim = \"{park}\"\nlog = \"x.clf\"\n"),
+            "source",
+        ),
+        ("[source]\n".to_string(), "source"),
+        (
+            format!("[source]\nsim = \"{park}\"\nmax_scans = 0\n"),
+            "source.max_scans",
+        ),
+        (
+            format!("[source]\nsim = \"{park}\"\nrelations = \"r\"\n"),
+            "source.relations",
+        ),
+        (
+            format!("[source]\nsim = \"{park}\"\n[run]\nmatchers = []\n"),
+            "run.matchers",
+        ),
+        (
+            format!("[source]\nsim = \"{park}\"\n[run]\nmatchers = [\"icp\"]\n"),
+            "icp",
+        ),
+        (
+            format!("[source]\nsim = \"{park}\"\n[run]\nmatchers = [\"wsm\"]\n[matchers.idc]\n"),
+            "matchers.idc",
+        ),
+        (
+            format!(
+                "[source]\nsim = \"{park}\"\n[run]\nmatchers = [\"wsm\"]\n[matchers.wsm]\nicp = {{ max_iterations = 0 }}\n"
+            ),
+            "max_iterations",
+        ),
+        (
+            format!(
+                "[source]\nsim = \"{park}\"\n[run]\nmatchers = [\"wsm\"]\n[matchers.wsm]\nidc = {{}}\n"
+            ),
+            "matcher.idc",
+        ),
+    ] {
+        let path = dir.join("bad.toml");
+        std::fs::write(&path, &text).expect("write config");
+        let o = qicp_run(&path, &dir.join("out"), &["--quiet"]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "accepted:\n{text}");
+        assert!(
+            stderr.contains(key),
+            "`{key}` not named for\n{text}\n{stderr}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
