@@ -1,2 +1,32 @@
-//! qicp-bridge: see the crate description.
+//! # qicp-bridge
+//!
+//! Moves laser scans and pose estimates between processes through iceoryx2 shared memory:
+//! a simulator, a log replayer or a robot's laser driver publishes scans, the matcher process
+//! subscribes, matches and publishes poses, and any other process (Rust, C, C++, Python)
+//! subscribes to either stream.
+//!
+//! - [`messages`]: the `#[repr(C)]` wire types ([`ScanHeader`] + a slice of ranges,
+//!   [`PoseMessage`], the end-of-stream marker) and their conversions to [`qicp_core`] types;
+//! - [`ScanPublisher`], [`ScanSubscriber`], [`PosePublisher`], [`PoseSubscriber`]: typed ports
+//!   on the services `<prefix>/scan` and `<prefix>/pose` (see [`Topics`]);
+//! - [`sequence`]: the sequence-number bookkeeping that makes every loss visible.
+//!
+//! Zero copy: a publisher loans a sample in shared memory and writes the ranges into it;
+//! the subscriber reads the same memory ([`ScanView::ranges`]). The one copy on the receiving
+//! side is [`ScanHeader::to_record`], because [`qicp_core::Scan`] owns its ranges.
 #![warn(missing_docs)]
+
+pub mod error;
+pub mod messages;
+pub mod sequence;
+mod transport;
+
+pub use error::{ConnectError, PublishError, ReceiveError};
+pub use messages::{LAYOUT_VERSION, PoseC, PoseMessage, ScanHeader};
+pub use sequence::{SequenceTracker, StreamEnd, StreamReport};
+pub use transport::{
+    BackPressure, DEFAULT_PREFIX, MAX_PUBLISHERS, MAX_SUBSCRIBERS, POSE_BUFFER_MAX,
+    POSE_HISTORY_MAX, PosePublisher, PoseSubscriber, PublisherOptions, SCAN_BUFFER_MAX,
+    SCAN_HISTORY_MAX, ScanPublisher, ScanSubscriber, ScanView, StreamEvent, SubscriberOptions,
+    Topics, WaitOptions, event_id,
+};

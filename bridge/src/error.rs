@@ -1,0 +1,138 @@
+//! One error enum per operation: connecting (node, services, ports), publishing, receiving.
+//!
+//! iceoryx2's own errors are kept as their `Debug` text (`detail`): they are many small enums
+//! per call, and the caller needs the operation and the service that failed, not the type.
+
+use thiserror::Error;
+
+/// Creating a publisher or subscriber: the node, the services and the ports.
+#[derive(Debug, Error)]
+pub enum ConnectError {
+    /// The service prefix makes an invalid iceoryx2 service name.
+    #[error("invalid service name {name:?}: {detail}")]
+    BadServiceName {
+        /// The name.
+        name: String,
+        /// Why iceoryx2 refused it.
+        detail: String,
+    },
+    /// The iceoryx2 node could not be created.
+    #[error("creating the iceoryx2 node: {detail}")]
+    Node {
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// The service exists with the other back-pressure mode (overflow setting).
+    #[error(
+        "service {service:?} exists in {existing} mode but {requested} was asked for: give both \
+         sides the same --backpressure, or let the subscriber adopt the publisher's"
+    )]
+    BackPressureMismatch {
+        /// The service.
+        service: String,
+        /// The mode the service has.
+        existing: &'static str,
+        /// The mode requested.
+        requested: &'static str,
+    },
+    /// Opening or creating a service failed.
+    #[error("opening service {service:?}: {detail}")]
+    Service {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// Creating a port (publisher, subscriber, notifier, listener) failed.
+    #[error("creating the {port} port of {service:?}: {detail}")]
+    Port {
+        /// Which port.
+        port: &'static str,
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// A request outside the service's fixed limits.
+    #[error("{what} {requested} exceeds the service limit {limit}")]
+    Limit {
+        /// What was requested.
+        what: &'static str,
+        /// The request.
+        requested: usize,
+        /// The limit.
+        limit: usize,
+    },
+}
+
+/// Publishing one message.
+#[derive(Debug, Error)]
+pub enum PublishError {
+    /// No sample could be loaned (all in use, or the scan is longer than the segment allows).
+    #[error("loaning a sample on {service:?}: {detail}")]
+    Loan {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// The sample could not be delivered; in `block` mode this includes a subscriber whose
+    /// buffer stayed full for longer than the block timeout.
+    #[error("sending on {service:?}: {detail}")]
+    Send {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// Waking the subscribers failed.
+    #[error("notifying the subscribers of {service:?}: {detail}")]
+    Notify {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// The scan has more beams than a sample header can count.
+    #[error("a scan of {beams} beams is too long for the wire format")]
+    TooManyBeams {
+        /// The beams.
+        beams: usize,
+    },
+}
+
+/// Waiting for or receiving messages.
+#[derive(Debug, Error)]
+pub enum ReceiveError {
+    /// The WaitSet could not be created, attached or run.
+    #[error("waiting on {service:?}: {detail}")]
+    Wait {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// Taking a sample from the subscriber's buffer failed.
+    #[error("receiving from {service:?}: {detail}")]
+    Receive {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+    /// A message with another layout version: the two sides were built from different
+    /// versions of qicp.
+    #[error("message layout version {found} on {service:?}, expected {expected}")]
+    LayoutVersion {
+        /// The service.
+        service: String,
+        /// The version received.
+        found: u32,
+        /// This build's version.
+        expected: u32,
+    },
+}
+
+pub(crate) fn detail(e: impl std::fmt::Debug) -> String {
+    format!("{e:?}")
+}

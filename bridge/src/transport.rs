@@ -1,0 +1,1163 @@
+//! The iceoryx2 side: services, typed publishers and subscribers, waiting.
+//!
+//! Each stream is two iceoryx2 services of the same name: a publish-subscribe service carrying
+//! the messages and an event service that wakes the other side (a sample was sent, a subscriber
+//! connected or left). Subscribers block in a [`WaitSet`] on their event listener; between
+//! events they wake only on a `tick` to notice a publisher that died without saying so.
+
+use crate::error::{ConnectError, PublishError, ReceiveError, detail};
+use crate::messages::{KIND_END_OF_STREAM, LAYOUT_VERSION, PoseMessage, ScanHeader};
+use crate::sequence::{Observation, SequenceTracker, StreamEnd, StreamReport};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::port::{BackpressureAction, BackpressureInfo};
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeCreateError, PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe};
+use iceoryx2::waitset::WaitSetRunResult;
+use qicp_core::Record;
+use std::ops::ControlFlow;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// The default service prefix: services `qicp/scan` and `qicp/pose`.
+pub const DEFAULT_PREFIX: &str = "qicp";
+
+/// History a scan subscriber may ask for at most (samples the publisher keeps).
+pub const SCAN_HISTORY_MAX: usize = 64;
+/// Largest scan subscriber buffer.
+pub const SCAN_BUFFER_MAX: usize = 256;
+/// History a pose subscriber may ask for at most.
+pub const POSE_HISTORY_MAX: usize = 64;
+/// Largest pose subscriber buffer.
+pub const POSE_BUFFER_MAX: usize = 256;
+/// Subscribers per stream.
+pub const MAX_SUBSCRIBERS: usize = 8;
+/// Publishers per stream (one live; room for a dead one not yet cleaned up).
+pub const MAX_PUBLISHERS: usize = 4;
+
+/// Event ids on a stream's event service.
+pub mod event_id {
+    /// A publisher sent a sample (data or end-of-stream).
+    pub const SAMPLE: usize = 1;
+    /// A subscriber connected: publishers refresh their connections (deliver history).
+    pub const SUBSCRIBER_CONNECTED: usize = 2;
+    /// A subscriber left.
+    pub const SUBSCRIBER_LEFT: usize = 3;
+    /// A publisher connected.
+    pub const PUBLISHER_CONNECTED: usize = 4;
+    /// A publisher left.
+    pub const PUBLISHER_LEFT: usize = 5;
+    /// A subscriber has attached to every publisher it can see and can take samples: sent
+    /// after a publisher appeared. iceoryx2 drops (rather than block on) a sample for a
+    /// subscriber that has not attached yet once its buffer is full, so a `block` publisher
+    /// waits for this before its first send.
+    pub const SUBSCRIBER_READY: usize = 6;
+}
+
+/// The service names of one qicp bridge (`<prefix>/scan`, `<prefix>/pose`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Topics {
+    prefix: String,
+}
+
+impl Default for Topics {
+    fn default() -> Self {
+        Self::new(DEFAULT_PREFIX)
+    }
+}
+
+impl Topics {
+    /// Topics under `prefix` (e.g. `qicp`, or a unique prefix per test).
+    #[must_use]
+    pub fn new(prefix: &str) -> Self {
+        Self {
+            prefix: prefix.trim_end_matches('/').to_string(),
+        }
+    }
+
+    /// The scan stream, `<prefix>/scan`.
+    #[must_use]
+    pub fn scan(&self) -> String {
+        format!("{}/scan", self.prefix)
+    }
+
+    /// The pose stream, `<prefix>/pose`.
+    #[must_use]
+    pub fn pose(&self) -> String {
+        format!("{}/pose", self.prefix)
+    }
+}
+
+/// What a publisher does when a subscriber's buffer is full.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BackPressure {
+    /// The publisher waits until the subscriber has room: lossless (replay, simulation).
+    #[default]
+    Block,
+    /// The newest sample overwrites the subscriber's oldest; the subscriber counts the gap
+    /// (live sensors, where a stale scan is worth less than a fresh one).
+    DropOldest,
+}
+
+impl BackPressure {
+    /// `block` or `drop-oldest`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            BackPressure::Block => "block",
+            BackPressure::DropOldest => "drop-oldest",
+        }
+    }
+
+    fn safe_overflow(self) -> bool {
+        self == BackPressure::DropOldest
+    }
+
+    fn of_overflow(safe_overflow: bool) -> Self {
+        if safe_overflow {
+            BackPressure::DropOldest
+        } else {
+            BackPressure::Block
+        }
+    }
+}
+
+impl std::fmt::Display for BackPressure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for BackPressure {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "block" => Ok(BackPressure::Block),
+            "drop-oldest" => Ok(BackPressure::DropOldest),
+            other => Err(format!(
+                "unknown back-pressure {other:?}: use block or drop-oldest"
+            )),
+        }
+    }
+}
+
+/// Options of a scan publisher.
+#[derive(Debug, Clone)]
+pub struct PublisherOptions {
+    /// Back-pressure mode (must match the service's if it already exists).
+    pub backpressure: BackPressure,
+    /// Beams per scan the shared-memory segment is first sized for; longer scans grow it.
+    pub beams: usize,
+    /// In `block` mode, how long one send may wait for a full subscriber before it fails.
+    pub block_timeout: Duration,
+}
+
+impl Default for PublisherOptions {
+    fn default() -> Self {
+        Self {
+            backpressure: BackPressure::Block,
+            beams: 361,
+            block_timeout: Duration::from_secs(30),
+        }
+    }
+}
+
+/// How long a subscriber waits for what.
+#[derive(Debug, Clone, Copy)]
+pub struct WaitOptions {
+    /// For the first publisher to appear.
+    pub connect_timeout: Duration,
+    /// For a new publisher after one was lost.
+    pub reconnect_timeout: Duration,
+    /// For the next message while a publisher is connected.
+    pub idle_timeout: Duration,
+    /// How often a quiet subscriber checks that its publisher is alive.
+    pub tick: Duration,
+}
+
+impl Default for WaitOptions {
+    fn default() -> Self {
+        Self {
+            connect_timeout: Duration::from_secs(60),
+            reconnect_timeout: Duration::from_secs(10),
+            idle_timeout: Duration::from_secs(120),
+            tick: Duration::from_millis(100),
+        }
+    }
+}
+
+/// Options of a subscriber.
+#[derive(Debug, Clone, Default)]
+pub struct SubscriberOptions {
+    /// Messages sent before this subscriber connected that it asks for (at most the
+    /// service's history size).
+    pub history: usize,
+    /// Its buffer (0: the service's largest); raised to `history` if smaller.
+    pub buffer: usize,
+    /// The back-pressure mode to require; `None` adopts the mode of an existing service
+    /// (and creates a `block` one if none exists yet).
+    pub backpressure: Option<BackPressure>,
+    /// Timeouts.
+    pub wait: WaitOptions,
+}
+
+/// What a subscriber's callback is told.
+#[derive(Debug)]
+pub enum StreamEvent<M> {
+    /// A data message.
+    Data(M),
+    /// A publisher's first message; `skipped` of its messages were sent before it.
+    PublisherJoined {
+        /// Messages of the new publisher sent before the first one received.
+        skipped: u64,
+    },
+    /// The publisher vanished without an end-of-stream marker.
+    PublisherLost,
+    /// `missing` messages were lost just before the next one.
+    Gap {
+        /// Messages lost.
+        missing: u64,
+    },
+}
+
+/// A received scan, read in place from shared memory.
+#[derive(Debug, Clone, Copy)]
+pub struct ScanView<'a> {
+    /// The header.
+    pub header: &'a ScanHeader,
+    /// The ranges, still in the publisher's shared-memory segment.
+    pub ranges: &'a [f64],
+}
+
+type Ipc = ipc::Service;
+
+fn service_name(name: &str) -> Result<ServiceName, ConnectError> {
+    ServiceName::new(name).map_err(|e| ConnectError::BadServiceName {
+        name: name.to_string(),
+        detail: detail(e),
+    })
+}
+
+fn create_node() -> Result<Node<Ipc>, ConnectError> {
+    // iceoryx2 warns on stderr that it runs without a config file; qicp needs none.
+    // `IOX2_LOG_LEVEL` still overrides this.
+    static QUIET: std::sync::Once = std::sync::Once::new();
+    QUIET.call_once(|| set_log_level_from_env_or(LogLevel::Error));
+    NodeBuilder::new()
+        .create::<Ipc>()
+        .map_err(|e| ConnectError::Node { detail: detail(e) })
+}
+
+/// The event half of a stream: wakes the other side.
+#[derive(Debug)]
+struct Signals {
+    notifier: Notifier<Ipc>,
+    listener: Listener<Ipc>,
+    _service: event_factory::PortFactory<Ipc>,
+}
+
+impl Signals {
+    fn open(node: &Node<Ipc>, name: &str) -> Result<Self, ConnectError> {
+        let service = node
+            .service_builder(&service_name(name)?)
+            .event()
+            .open_or_create()
+            .map_err(|e| ConnectError::Service {
+                service: name.to_string(),
+                detail: detail(e),
+            })?;
+        let port = |port: &'static str, e: String| ConnectError::Port {
+            port,
+            service: name.to_string(),
+            detail: e,
+        };
+        let notifier = service
+            .notifier_builder()
+            .create()
+            .map_err(|e| port("notifier", detail(e)))?;
+        let listener = service
+            .listener_builder()
+            .create()
+            .map_err(|e| port("listener", detail(e)))?;
+        Ok(Self {
+            notifier,
+            listener,
+            _service: service,
+        })
+    }
+
+    fn notify(&self, id: usize) -> Result<usize, String> {
+        self.notifier
+            .notify_with_custom_event_id(EventId::new(id))
+            .map_err(detail)
+    }
+
+    /// Waits up to `timeout` for any event, then consumes all pending ones.
+    fn wait(&self, timeout: Duration) -> Result<Seen, String> {
+        let mut seen = Seen::default();
+        self.listener
+            .timed_wait(|e| seen.add(e), timeout)
+            .map_err(detail)?;
+        self.listener.try_wait(|e| seen.add(e)).map_err(detail)?;
+        Ok(seen)
+    }
+
+    /// Consumes all pending events.
+    fn drain(&self) -> Result<Seen, String> {
+        let mut seen = Seen::default();
+        self.listener.try_wait(|e| seen.add(e)).map_err(detail)?;
+        Ok(seen)
+    }
+}
+
+/// The events of interest among those consumed.
+#[derive(Debug, Default, Clone, Copy)]
+struct Seen {
+    ready: u64,
+    publisher_connected: bool,
+}
+
+impl Seen {
+    fn add(&mut self, e: EventActivation) {
+        match e.id.as_value() {
+            event_id::SUBSCRIBER_READY => self.ready += e.count.max(1),
+            event_id::PUBLISHER_CONNECTED => self.publisher_connected = true,
+            _ => {}
+        }
+    }
+}
+
+/// What the publishers of both streams share: the node, the event signals and the
+/// subscriber bookkeeping.
+#[derive(Debug)]
+struct PublisherCore {
+    service: String,
+    signals: Signals,
+    node: Node<Ipc>,
+    sent: u64,
+    /// `SUBSCRIBER_READY` events seen since this publisher appeared.
+    ready: std::cell::Cell<u64>,
+}
+
+impl PublisherCore {
+    fn interrupted(&self) -> bool {
+        self.node.wait(Duration::ZERO).is_err()
+    }
+
+    /// Waits until `count(subscribers)` holds or `timeout` passes; true if it holds.
+    /// Dead subscribers are cleaned up on the way, so a killed one does not count.
+    fn wait_until(
+        &self,
+        timeout: Duration,
+        subscribers: &dyn Fn() -> usize,
+        holds: &dyn Fn(usize, u64) -> bool,
+    ) -> Result<bool, ReceiveError> {
+        let deadline = Instant::now() + timeout;
+        let wait_error = |detail| ReceiveError::Wait {
+            service: self.service.clone(),
+            detail,
+        };
+        loop {
+            self.node.try_cleanup_dead_nodes();
+            let seen = self.signals.drain().map_err(wait_error)?;
+            self.ready.set(self.ready.get() + seen.ready);
+            if holds(subscribers(), self.ready.get()) {
+                return Ok(true);
+            }
+            let now = Instant::now();
+            if now >= deadline || self.interrupted() {
+                return Ok(false);
+            }
+            let step = (deadline - now).min(Duration::from_millis(200));
+            let seen = self.signals.wait(step).map_err(wait_error)?;
+            self.ready.set(self.ready.get() + seen.ready);
+        }
+    }
+
+    fn notify_sample(&self) -> Result<(), PublishError> {
+        self.signals
+            .notify(event_id::SAMPLE)
+            .map(|_| ())
+            .map_err(|detail| PublishError::Notify {
+                service: self.service.clone(),
+                detail,
+            })
+    }
+}
+
+/// Publishes scans on `<prefix>/scan`; the ranges are written straight into loaned shared
+/// memory (the only write; subscribers read them in place).
+#[derive(Debug)]
+pub struct ScanPublisher {
+    publisher: Option<Publisher<Ipc, [f64], ScanHeader>>,
+    service: publish_subscribe::PortFactory<Ipc, [f64], ScanHeader>,
+    core: PublisherCore,
+    backpressure: BackPressure,
+    blocked: Arc<AtomicU64>,
+}
+
+fn scan_service_builder(
+    node: &Node<Ipc>,
+    name: &ServiceName,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<[f64], ScanHeader, Ipc> {
+    node.service_builder(name)
+        .publish_subscribe::<[f64]>()
+        .user_header::<ScanHeader>()
+        .history_size(SCAN_HISTORY_MAX)
+        .subscriber_max_buffer_size(SCAN_BUFFER_MAX)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .max_publishers(MAX_PUBLISHERS)
+}
+
+fn pose_service_builder(
+    node: &Node<Ipc>,
+    name: &ServiceName,
+) -> iceoryx2::service::builder::publish_subscribe::Builder<PoseMessage, (), Ipc> {
+    node.service_builder(name)
+        .publish_subscribe::<PoseMessage>()
+        .enable_safe_overflow(true)
+        .history_size(POSE_HISTORY_MAX)
+        .subscriber_max_buffer_size(POSE_BUFFER_MAX)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .max_publishers(MAX_PUBLISHERS)
+}
+
+fn open_error(service: &str, requested: BackPressure, e: impl std::fmt::Debug) -> ConnectError {
+    let text = detail(&e);
+    if text.contains("IncompatibleOverflowBehavior") {
+        ConnectError::BackPressureMismatch {
+            service: service.to_string(),
+            existing: BackPressure::of_overflow(!requested.safe_overflow()).name(),
+            requested: requested.name(),
+        }
+    } else {
+        ConnectError::Service {
+            service: service.to_string(),
+            detail: text,
+        }
+    }
+}
+
+impl ScanPublisher {
+    /// Opens (or creates) `<prefix>/scan` and a publisher on it.
+    pub fn create(topics: &Topics, options: &PublisherOptions) -> Result<Self, ConnectError> {
+        let name = topics.scan();
+        let node = create_node()?;
+        let service = scan_service_builder(&node, &service_name(&name)?)
+            .enable_safe_overflow(options.backpressure.safe_overflow())
+            .open_or_create()
+            .map_err(|e| open_error(&name, options.backpressure, e))?;
+        // Listen before registering: a subscriber's READY answers our registration.
+        let signals = Signals::open(&node, &name)?;
+        let blocked = Arc::new(AtomicU64::new(0));
+        let counter = Arc::clone(&blocked);
+        let block_timeout = options.block_timeout;
+        let publisher = service
+            .publisher_builder()
+            .initial_max_slice_len(options.beams.max(1))
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+            .set_backpressure_handler(move |info: &BackpressureInfo| {
+                if info.retries == 0 {
+                    counter.fetch_add(1, Ordering::Relaxed);
+                }
+                if info.elapsed_time > block_timeout {
+                    BackpressureAction::DiscardDataAndFail
+                } else {
+                    BackpressureAction::Retry
+                }
+            })
+            .create()
+            .map_err(|e| ConnectError::Port {
+                port: "publisher",
+                service: name.clone(),
+                detail: detail(e),
+            })?;
+        let _ = signals.notify(event_id::PUBLISHER_CONNECTED);
+        Ok(Self {
+            publisher: Some(publisher),
+            service,
+            core: PublisherCore {
+                service: name,
+                signals,
+                node,
+                sent: 0,
+                ready: std::cell::Cell::new(0),
+            },
+            backpressure: options.backpressure,
+            blocked,
+        })
+    }
+
+    fn port(&self) -> &Publisher<Ipc, [f64], ScanHeader> {
+        self.publisher
+            .as_ref()
+            .unwrap_or_else(|| unreachable!("the publisher is taken only on drop"))
+    }
+
+    /// Publishes `record` as the next scan; returns its sequence number.
+    ///
+    /// The ranges are copied once, from the record into the loaned sample: that is the
+    /// publisher's write. A source that produces ranges itself should use
+    /// [`ScanPublisher::publish_with`] and write them into the sample directly.
+    pub fn publish(&mut self, record: &Record) -> Result<u64, PublishError> {
+        let header = ScanHeader::of(record, self.core.sent);
+        let ranges = record.scan.ranges();
+        self.send(header, ranges.len(), |sample| sample.write_from_slice(ranges))
+    }
+
+    /// Publishes a scan whose `beams` ranges `range(i)` computes straight into the loaned
+    /// shared memory (e.g. a laser driver decoding its packet in place). `header`'s `seq`,
+    /// `beams`, `kind` and `layout_version` are set here.
+    pub fn publish_with(
+        &mut self,
+        header: ScanHeader,
+        beams: usize,
+        range: impl FnMut(usize) -> f64,
+    ) -> Result<u64, PublishError> {
+        self.send(header, beams, |sample| sample.write_from_fn(range))
+    }
+
+    fn send(
+        &mut self,
+        mut header: ScanHeader,
+        beams: usize,
+        write: impl FnOnce(UninitScan) -> ScanSample,
+    ) -> Result<u64, PublishError> {
+        let seq = self.core.sent;
+        header.layout_version = LAYOUT_VERSION;
+        header.kind = crate::messages::KIND_DATA;
+        header.seq = seq;
+        header.beams = u32::try_from(beams).map_err(|_| PublishError::TooManyBeams { beams })?;
+        let mut sample = self.loan(beams)?;
+        *sample.user_header_mut() = header;
+        self.deliver(write(sample))?;
+        self.core.sent += 1;
+        Ok(seq)
+    }
+
+    fn loan(&self, beams: usize) -> Result<UninitScan, PublishError> {
+        self.port()
+            .loan_slice_uninit(beams)
+            .map_err(|e| PublishError::Loan {
+                service: self.core.service.clone(),
+                detail: detail(e),
+            })
+    }
+
+    fn deliver(&self, sample: ScanSample) -> Result<(), PublishError> {
+        sample.send().map_err(|e| PublishError::Send {
+            service: self.core.service.clone(),
+            detail: detail(e),
+        })?;
+        self.core.notify_sample()
+    }
+
+    /// Sends the end-of-stream marker (no ranges; its `seq` is the number of scans sent).
+    pub fn end_of_stream(&mut self) -> Result<(), PublishError> {
+        let mut sample = self.loan(0)?;
+        *sample.user_header_mut() = ScanHeader::end_of_stream(self.core.sent);
+        self.deliver(sample.write_from_slice(&[]))
+    }
+
+    /// Scans published so far.
+    #[must_use]
+    pub fn sent(&self) -> u64 {
+        self.core.sent
+    }
+
+    /// Sends that found a subscriber's buffer full and had to wait (`block` mode).
+    #[must_use]
+    pub fn blocked_sends(&self) -> u64 {
+        self.blocked.load(Ordering::Relaxed)
+    }
+
+    /// The back-pressure mode.
+    #[must_use]
+    pub fn backpressure(&self) -> BackPressure {
+        self.backpressure
+    }
+
+    /// Subscribers connected now.
+    #[must_use]
+    pub fn subscribers(&self) -> usize {
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Waits (on events, with `timeout`) until at least `n` subscribers are connected and
+    /// have said they are ready to take samples. Returns false on timeout or SIGINT/SIGTERM.
+    pub fn wait_for_subscribers(&self, n: usize, timeout: Duration) -> Result<bool, ReceiveError> {
+        let port = self.port();
+        self.core.wait_until(timeout, &|| self.subscribers(), &|k, ready| {
+            // Connect to them now so that they get their history without waiting for a send.
+            let _ = port.update_connections();
+            k >= n && ready >= n as u64
+        })
+    }
+
+    /// After the end-of-stream marker: waits (with `timeout`) until every subscriber has
+    /// left, so none loses what is still in its buffer when this process exits.
+    pub fn linger(&self, timeout: Duration) -> Result<bool, ReceiveError> {
+        self.core.wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
+    }
+
+    /// Whether SIGINT or SIGTERM arrived (iceoryx2 catches them to exit cleanly).
+    #[must_use]
+    pub fn interrupted(&self) -> bool {
+        self.core.interrupted()
+    }
+}
+
+type UninitScan = iceoryx2::sample_mut_uninit::SampleMutUninit<
+    Ipc,
+    [std::mem::MaybeUninit<f64>],
+    ScanHeader,
+>;
+type ScanSample = iceoryx2::sample_mut::SampleMut<Ipc, [f64], ScanHeader>;
+
+impl Drop for ScanPublisher {
+    fn drop(&mut self) {
+        // Leave first, then say so: a subscriber woken by the event must see us gone.
+        self.publisher.take();
+        let _ = self.core.signals.notify(event_id::PUBLISHER_LEFT);
+    }
+}
+
+/// Publishes the matcher's poses on `<prefix>/pose` (always drop-oldest: the matcher never
+/// waits for a slow pose consumer, which counts its gaps instead).
+#[derive(Debug)]
+pub struct PosePublisher {
+    publisher: Option<Publisher<Ipc, PoseMessage, ()>>,
+    service: publish_subscribe::PortFactory<Ipc, PoseMessage, ()>,
+    core: PublisherCore,
+}
+
+impl PosePublisher {
+    /// Opens (or creates) `<prefix>/pose` and a publisher on it.
+    pub fn create(topics: &Topics) -> Result<Self, ConnectError> {
+        let name = topics.pose();
+        let node = create_node()?;
+        let service = pose_service_builder(&node, &service_name(&name)?)
+            .open_or_create()
+            .map_err(|e| open_error(&name, BackPressure::DropOldest, e))?;
+        let signals = Signals::open(&node, &name)?;
+        let publisher = service
+            .publisher_builder()
+            .create()
+            .map_err(|e| ConnectError::Port {
+                port: "publisher",
+                service: name.clone(),
+                detail: detail(e),
+            })?;
+        let _ = signals.notify(event_id::PUBLISHER_CONNECTED);
+        Ok(Self {
+            publisher: Some(publisher),
+            service,
+            core: PublisherCore {
+                service: name,
+                signals,
+                node,
+                sent: 0,
+                ready: std::cell::Cell::new(0),
+            },
+        })
+    }
+
+    /// Publishes one pose; `message.seq` is set here. Returns the sequence number.
+    pub fn publish(&mut self, mut message: PoseMessage) -> Result<u64, PublishError> {
+        let seq = self.core.sent;
+        message.seq = seq;
+        self.write(message)?;
+        self.core.sent += 1;
+        Ok(seq)
+    }
+
+    /// Sends the end-of-stream marker.
+    pub fn end_of_stream(&mut self) -> Result<(), PublishError> {
+        self.write(PoseMessage::end_of_stream(self.core.sent))
+    }
+
+    fn write(&self, message: PoseMessage) -> Result<(), PublishError> {
+        let service = &self.core.service;
+        let port = self
+            .publisher
+            .as_ref()
+            .unwrap_or_else(|| unreachable!("the publisher is taken only on drop"));
+        let sample = port.loan_uninit().map_err(|e| PublishError::Loan {
+            service: service.clone(),
+            detail: detail(e),
+        })?;
+        sample
+            .write_payload(message)
+            .send()
+            .map_err(|e| PublishError::Send {
+                service: service.clone(),
+                detail: detail(e),
+            })?;
+        self.core.notify_sample()
+    }
+
+    /// Poses published so far.
+    #[must_use]
+    pub fn sent(&self) -> u64 {
+        self.core.sent
+    }
+
+    /// Subscribers connected now.
+    #[must_use]
+    pub fn subscribers(&self) -> usize {
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Waits until every pose subscriber has left (or `timeout`).
+    pub fn linger(&self, timeout: Duration) -> Result<bool, ReceiveError> {
+        self.core.wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
+    }
+}
+
+impl Drop for PosePublisher {
+    fn drop(&mut self) {
+        self.publisher.take();
+        let _ = self.core.signals.notify(event_id::PUBLISHER_LEFT);
+    }
+}
+
+/// What the receive loop needs to know of one sample.
+struct Meta {
+    version: u32,
+    kind: u32,
+    seq: u64,
+    origin: u128,
+}
+
+/// The receive loop shared by both subscribers: wait on the WaitSet, drain the buffer,
+/// check the numbers, watch the publisher's liveness; every wait bounded.
+#[allow(clippy::too_many_arguments)]
+fn run_loop<S>(
+    node: &Node<Ipc>,
+    signals: &Signals,
+    service: &str,
+    wait: &WaitOptions,
+    receive: &dyn Fn() -> Result<Option<S>, String>,
+    attach: &dyn Fn() -> Result<(), String>,
+    publishers: &dyn Fn() -> usize,
+    meta: &dyn Fn(&S) -> Meta,
+    deliver: &mut dyn FnMut(StreamEvent<&S>) -> ControlFlow<()>,
+) -> Result<StreamReport, ReceiveError> {
+    let wait_error = |detail: String| ReceiveError::Wait {
+        service: service.to_string(),
+        detail,
+    };
+    let waitset = WaitSetBuilder::new()
+        .create::<Ipc>()
+        .map_err(|e| wait_error(detail(e)))?;
+    let _guard = waitset
+        .attach_notification(&signals.listener)
+        .map_err(|e| wait_error(detail(e)))?;
+
+    let mut tracker = SequenceTracker::new();
+    let started = Instant::now();
+    let mut present = false;
+    let mut lost_since: Option<Instant> = None;
+    let mut last_activity = Instant::now();
+    let mut last_cleanup = Instant::now();
+    let mut known_publishers = 0;
+    let mut publisher_connected = true;
+    loop {
+        // Attach to new publishers, then tell them (count read first: we attach to at least
+        // those counted).
+        let count = publishers();
+        if publisher_connected || count > known_publishers {
+            attach().map_err(|detail| ReceiveError::Receive {
+                service: service.to_string(),
+                detail,
+            })?;
+            if count > 0 {
+                let _ = signals.notify(event_id::SUBSCRIBER_READY);
+            }
+        }
+        known_publishers = count;
+
+        // Drain the buffer.
+        while let Some(sample) = receive().map_err(|detail| ReceiveError::Receive {
+            service: service.to_string(),
+            detail,
+        })? {
+            last_activity = Instant::now();
+            let m = meta(&sample);
+            if m.version != LAYOUT_VERSION {
+                return Err(ReceiveError::LayoutVersion {
+                    service: service.to_string(),
+                    found: m.version,
+                    expected: LAYOUT_VERSION,
+                });
+            }
+            if m.kind == KIND_END_OF_STREAM {
+                tracker.end_of_stream(m.origin, m.seq);
+                return Ok(tracker.finish(StreamEnd::EndOfStream));
+            }
+            let replaced = tracker.has_open_stream();
+            let event = match tracker.observe(m.origin, m.seq) {
+                Observation::OutOfOrder => continue,
+                Observation::InOrder => None,
+                Observation::Gap { missing } => Some(StreamEvent::Gap { missing }),
+                Observation::NewPublisher { skipped } => {
+                    if replaced && deliver(StreamEvent::PublisherLost).is_break() {
+                        return Ok(tracker.finish(StreamEnd::Stopped));
+                    }
+                    Some(StreamEvent::PublisherJoined { skipped })
+                }
+            };
+            if let Some(event) = event
+                && deliver(event).is_break()
+            {
+                return Ok(tracker.finish(StreamEnd::Stopped));
+            }
+            if deliver(StreamEvent::Data(&sample)).is_break() {
+                return Ok(tracker.finish(StreamEnd::Stopped));
+            }
+        }
+
+        // Liveness: a killed publisher stays registered until someone removes its dead
+        // node; a quiet subscriber does so once per tick.
+        let now = Instant::now();
+        if now - last_activity >= wait.tick && now - last_cleanup >= wait.tick {
+            node.try_cleanup_dead_nodes();
+            last_cleanup = now;
+        }
+        if publishers() > 0 {
+            present = true;
+            lost_since = None;
+            if now - last_activity > wait.idle_timeout {
+                return Ok(tracker.finish(StreamEnd::Idle));
+            }
+        } else {
+            if present {
+                present = false;
+                lost_since = Some(now);
+                if tracker.has_open_stream() {
+                    tracker.publisher_lost();
+                    if deliver(StreamEvent::PublisherLost).is_break() {
+                        return Ok(tracker.finish(StreamEnd::Stopped));
+                    }
+                }
+            }
+            match lost_since {
+                Some(since) if now - since > wait.reconnect_timeout => {
+                    return Ok(tracker.finish(StreamEnd::PublisherLost));
+                }
+                None if now - started > wait.connect_timeout => {
+                    let end = if tracker.report().publishers_seen > 0 {
+                        StreamEnd::PublisherLost
+                    } else {
+                        StreamEnd::NoPublisher
+                    };
+                    return Ok(tracker.finish(end));
+                }
+                _ => {}
+            }
+        }
+
+        // Sleep until an event (a sample, a peer coming or going) or the next tick.
+        let result = waitset
+            .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, wait.tick)
+            .map_err(|e| wait_error(detail(e)))?;
+        if matches!(
+            result,
+            WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt
+        ) {
+            return Ok(tracker.finish(StreamEnd::Interrupted));
+        }
+        publisher_connected = signals.drain().map_err(wait_error)?.publisher_connected;
+    }
+}
+
+fn subscriber_limits(
+    options: &SubscriberOptions,
+    history_max: usize,
+    buffer_max: usize,
+) -> Result<(usize, usize), ConnectError> {
+    if options.history > history_max {
+        return Err(ConnectError::Limit {
+            what: "history",
+            requested: options.history,
+            limit: history_max,
+        });
+    }
+    let buffer = if options.buffer == 0 {
+        buffer_max
+    } else {
+        options.buffer.max(options.history)
+    };
+    if buffer > buffer_max {
+        return Err(ConnectError::Limit {
+            what: "buffer",
+            requested: buffer,
+            limit: buffer_max,
+        });
+    }
+    Ok((options.history, buffer))
+}
+
+/// Receives scans from `<prefix>/scan`.
+#[derive(Debug)]
+pub struct ScanSubscriber {
+    subscriber: Option<Subscriber<Ipc, [f64], ScanHeader>>,
+    service: publish_subscribe::PortFactory<Ipc, [f64], ScanHeader>,
+    signals: Signals,
+    node: Node<Ipc>,
+    name: String,
+    options: SubscriberOptions,
+}
+
+impl ScanSubscriber {
+    /// Opens `<prefix>/scan` (adopting an existing service's back-pressure mode unless
+    /// `options.backpressure` requires one) and subscribes.
+    pub fn create(topics: &Topics, options: &SubscriberOptions) -> Result<Self, ConnectError> {
+        let name = topics.scan();
+        let (history, buffer) = subscriber_limits(options, SCAN_HISTORY_MAX, SCAN_BUFFER_MAX)?;
+        let node = create_node()?;
+        let sname = service_name(&name)?;
+        let service = open_adopting(&name, options.backpressure, |overflow| {
+            let b = scan_service_builder(&node, &sname);
+            match overflow {
+                Some(o) => b.enable_safe_overflow(o).create().map_err(Attempt::Create),
+                None => b.open().map_err(Attempt::Open),
+            }
+        })?;
+        let subscriber = service
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .history_request(history)
+            .create()
+            .map_err(|e| ConnectError::Port {
+                port: "subscriber",
+                service: name.clone(),
+                detail: detail(e),
+            })?;
+        let signals = Signals::open(&node, &name)?;
+        let _ = signals.notify(event_id::SUBSCRIBER_CONNECTED);
+        Ok(Self {
+            subscriber: Some(subscriber),
+            service,
+            signals,
+            node,
+            name,
+            options: options.clone(),
+        })
+    }
+
+    /// The back-pressure mode of the service (adopted or required).
+    #[must_use]
+    pub fn backpressure(&self) -> BackPressure {
+        BackPressure::of_overflow(self.service.static_config().has_safe_overflow())
+    }
+
+    /// Receives until the end-of-stream marker, a lost publisher (none back within the
+    /// reconnect timeout), a timeout, a signal, or `on_event` breaks. Scans are lent to
+    /// `on_event` in place; nothing is copied.
+    pub fn run(
+        &self,
+        mut on_event: impl FnMut(StreamEvent<ScanView<'_>>) -> ControlFlow<()>,
+    ) -> Result<StreamReport, ReceiveError> {
+        let port = self
+            .subscriber
+            .as_ref()
+            .unwrap_or_else(|| unreachable!("the subscriber is taken only on drop"));
+        run_loop(
+            &self.node,
+            &self.signals,
+            &self.name,
+            &self.options.wait,
+            &|| port.receive().map_err(detail),
+            &|| port.update_connections().map_err(detail),
+            &|| self.service.dynamic_config().number_of_publishers(),
+            &|s: &Sample<Ipc, [f64], ScanHeader>| Meta {
+                version: s.user_header().layout_version,
+                kind: s.user_header().kind,
+                seq: s.user_header().seq,
+                origin: s.origin().value(),
+            },
+            &mut |event| {
+                on_event(match event {
+                    StreamEvent::Data(s) => StreamEvent::Data(ScanView {
+                        header: s.user_header(),
+                        ranges: s.payload(),
+                    }),
+                    StreamEvent::PublisherJoined { skipped } => {
+                        StreamEvent::PublisherJoined { skipped }
+                    }
+                    StreamEvent::PublisherLost => StreamEvent::PublisherLost,
+                    StreamEvent::Gap { missing } => StreamEvent::Gap { missing },
+                })
+            },
+        )
+    }
+}
+
+impl Drop for ScanSubscriber {
+    fn drop(&mut self) {
+        self.subscriber.take();
+        let _ = self.signals.notify(event_id::SUBSCRIBER_LEFT);
+    }
+}
+
+/// Receives poses from `<prefix>/pose`.
+#[derive(Debug)]
+pub struct PoseSubscriber {
+    subscriber: Option<Subscriber<Ipc, PoseMessage, ()>>,
+    service: publish_subscribe::PortFactory<Ipc, PoseMessage, ()>,
+    signals: Signals,
+    node: Node<Ipc>,
+    name: String,
+    options: SubscriberOptions,
+}
+
+impl PoseSubscriber {
+    /// Opens `<prefix>/pose` and subscribes (`options.backpressure` is ignored: the pose
+    /// stream is always drop-oldest).
+    pub fn create(topics: &Topics, options: &SubscriberOptions) -> Result<Self, ConnectError> {
+        let name = topics.pose();
+        let (history, buffer) = subscriber_limits(options, POSE_HISTORY_MAX, POSE_BUFFER_MAX)?;
+        let node = create_node()?;
+        let service = pose_service_builder(&node, &service_name(&name)?)
+            .open_or_create()
+            .map_err(|e| open_error(&name, BackPressure::DropOldest, e))?;
+        let subscriber = service
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .history_request(history)
+            .create()
+            .map_err(|e| ConnectError::Port {
+                port: "subscriber",
+                service: name.clone(),
+                detail: detail(e),
+            })?;
+        let signals = Signals::open(&node, &name)?;
+        let _ = signals.notify(event_id::SUBSCRIBER_CONNECTED);
+        Ok(Self {
+            subscriber: Some(subscriber),
+            service,
+            signals,
+            node,
+            name,
+            options: options.clone(),
+        })
+    }
+
+    /// Receives poses until the end-of-stream marker, a lost publisher, a timeout, a signal,
+    /// or `on_event` breaks.
+    pub fn run(
+        &self,
+        mut on_event: impl FnMut(StreamEvent<&PoseMessage>) -> ControlFlow<()>,
+    ) -> Result<StreamReport, ReceiveError> {
+        let port = self
+            .subscriber
+            .as_ref()
+            .unwrap_or_else(|| unreachable!("the subscriber is taken only on drop"));
+        run_loop(
+            &self.node,
+            &self.signals,
+            &self.name,
+            &self.options.wait,
+            &|| port.receive().map_err(detail),
+            &|| port.update_connections().map_err(detail),
+            &|| self.service.dynamic_config().number_of_publishers(),
+            &|s: &Sample<Ipc, PoseMessage, ()>| Meta {
+                version: s.payload().layout_version,
+                kind: s.payload().kind,
+                seq: s.payload().seq,
+                origin: s.origin().value(),
+            },
+            &mut |event| {
+                on_event(match event {
+                    StreamEvent::Data(s) => StreamEvent::Data(s.payload()),
+                    StreamEvent::PublisherJoined { skipped } => {
+                        StreamEvent::PublisherJoined { skipped }
+                    }
+                    StreamEvent::PublisherLost => StreamEvent::PublisherLost,
+                    StreamEvent::Gap { missing } => StreamEvent::Gap { missing },
+                })
+            },
+        )
+    }
+}
+
+impl Drop for PoseSubscriber {
+    fn drop(&mut self) {
+        self.subscriber.take();
+        let _ = self.signals.notify(event_id::SUBSCRIBER_LEFT);
+    }
+}
+
+/// One attempt at opening or creating a service.
+enum Attempt {
+    Open(PublishSubscribeOpenError),
+    Create(PublishSubscribeCreateError),
+}
+
+/// Opens the service if it exists, whatever its overflow setting (unless `required`), and
+/// creates it with `required` (default `block`) if not; retries the race where another
+/// process creates it in between.
+fn open_adopting<T>(
+    name: &str,
+    required: Option<BackPressure>,
+    attempt: impl Fn(Option<bool>) -> Result<T, Attempt>,
+) -> Result<T, ConnectError>
+where
+    T: HasOverflow,
+{
+    let fail = |e: String| ConnectError::Service {
+        service: name.to_string(),
+        detail: e,
+    };
+    for _ in 0..100 {
+        match attempt(None) {
+            Ok(service) => {
+                let existing = BackPressure::of_overflow(service.safe_overflow());
+                return match required {
+                    Some(r) if r != existing => Err(ConnectError::BackPressureMismatch {
+                        service: name.to_string(),
+                        existing: existing.name(),
+                        requested: r.name(),
+                    }),
+                    _ => Ok(service),
+                };
+            }
+            Err(Attempt::Open(PublishSubscribeOpenError::DoesNotExist)) => {}
+            Err(Attempt::Open(e)) => return Err(fail(detail(e))),
+            Err(Attempt::Create(e)) => return Err(fail(detail(e))),
+        }
+        let mode = required.unwrap_or_default();
+        match attempt(Some(mode.safe_overflow())) {
+            Ok(service) => return Ok(service),
+            Err(Attempt::Create(
+                PublishSubscribeCreateError::AlreadyExists
+                | PublishSubscribeCreateError::IsBeingCreatedByAnotherInstance,
+            )) => std::thread::sleep(Duration::from_millis(10)),
+            Err(Attempt::Create(e)) => return Err(fail(detail(e))),
+            Err(Attempt::Open(e)) => return Err(fail(detail(e))),
+        }
+    }
+    Err(fail(detail(PublishSubscribeOpenOrCreateError::SystemInFlux)))
+}
+
+trait HasOverflow {
+    fn safe_overflow(&self) -> bool;
+}
+
+impl<P: std::fmt::Debug + IceoryxSend + ?Sized, H: std::fmt::Debug + ZeroCopySend>
+    HasOverflow for publish_subscribe::PortFactory<Ipc, P, H>
+{
+    fn safe_overflow(&self) -> bool {
+        self.static_config().has_safe_overflow()
+    }
+}
