@@ -373,11 +373,23 @@ pub fn occupancy_map(
         .label("start")
         .legend(|(x, y)| Circle::new((x + 12, y), 5, PALETTE[0].filled()));
     }
+    // Where the legend hides the fewest returns and path.
+    let returns = lasers.iter().zip(scans).flat_map(|(l, s)| {
+        s.points().iter().map(move |p| {
+            let q = *l * *p;
+            (q.x, q.y)
+        })
+    });
+    let corner = emptiest_corner(
+        returns.chain(path.iter().map(|p| (p.x, p.y))),
+        (x0, x1),
+        (y0, y1),
+    );
     tri!(
         out,
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(corner)
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
             .label_font((FONT, 16))
@@ -403,6 +415,35 @@ fn map_chart<'a, 'b>(
         .x_label_area_size(50)
         .y_label_area_size(64)
         .build_cartesian_2d(x0..x1, y0..y1)
+}
+
+/// The corner of `[x0, x1] × [y0, y1]` whose legend-sized box (a quarter of the width, a third
+/// of the height) holds the fewest of `points`: where the legend hides the least.
+fn emptiest_corner(
+    points: impl Iterator<Item = (f64, f64)>,
+    (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
+) -> SeriesLabelPosition {
+    let (w, h) = ((x1 - x0) / 4.0, (y1 - y0) / 3.0);
+    let mut counts = [0usize; 4]; // upper right, upper left, lower right, lower left
+    for (x, y) in points {
+        let right = x > x1 - w;
+        let left = x < x0 + w;
+        let upper = y > y1 - h;
+        let lower = y < y0 + h;
+        counts[0] += usize::from(upper && right);
+        counts[1] += usize::from(upper && left);
+        counts[2] += usize::from(lower && right);
+        counts[3] += usize::from(lower && left);
+    }
+    let best = (0..4).min_by_key(|&k| counts[k]).unwrap_or(0);
+    [
+        SeriesLabelPosition::UpperRight,
+        SeriesLabelPosition::UpperLeft,
+        SeriesLabelPosition::LowerRight,
+        SeriesLabelPosition::LowerLeft,
+    ][best]
+        .clone()
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -512,11 +553,18 @@ pub fn trajectories(out: &Path, title: &str, series: &[PathSeries<'_>]) -> Resul
         .label("start")
         .legend(|(x, y)| Circle::new((x + 12, y), 5, BLACK.filled()));
     }
+    let corner = emptiest_corner(
+        series
+            .iter()
+            .flat_map(|s| s.poses.iter().map(|p| (p.x, p.y))),
+        (x0, x1),
+        (y0, y1),
+    );
     tri!(
         out,
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(corner)
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
             .label_font((FONT, 16))
