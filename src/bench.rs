@@ -31,6 +31,8 @@ use std::time::{Duration, Instant};
 pub enum BenchCommand {
     /// Spatial indexes: build, incremental scan insertion and nearest-neighbour query times.
     Index(IndexArgs),
+    /// The iceoryx2 bridge: one-way latency and throughput against a Unix-domain socket.
+    Bridge(crate::bridge_cmd::BridgeBenchArgs),
 }
 
 /// Runs the command.
@@ -45,6 +47,7 @@ pub fn run(c: BenchCommand) -> Result<()> {
             }
             Ok(())
         }
+        BenchCommand::Bridge(a) => crate::bridge_cmd::run_bench(&a),
     }
 }
 

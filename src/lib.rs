@@ -5,6 +5,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod bridge_cmd;
 pub mod eval;
 pub mod experiment;
 pub mod logs;

@@ -1,6 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-use qicp::{bench, eval, experiment, match_cmd, sim_cmd};
+use qicp::{bench, bridge_cmd, eval, experiment, match_cmd, sim_cmd};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -24,6 +24,8 @@ enum Command {
     /// Match every scan of a CARMEN log with one matcher; write trajectory, per-scan figures
     /// and a summary.
     Match(match_cmd::MatchArgs),
+    /// Publish a CARMEN log's scans through the iceoryx2 bridge (`--publish`).
+    Replay(bridge_cmd::ReplayArgs),
     /// Run an experiment: simulate or load a drive, run every matcher on it, score them and
     /// draw the paper's figures.
     Run(experiment::RunArgs),
@@ -37,6 +39,7 @@ fn main() -> Result<()> {
         Command::Bench(c) => bench::run(c),
         Command::Eval(c) => eval::run(c),
         Command::Match(a) => match_cmd::run(a),
+        Command::Replay(a) => bridge_cmd::run_replay(a),
         Command::Run(a) => experiment::run(a),
         Command::Sim(a) => sim_cmd::run(a),
     }

@@ -9,17 +9,18 @@ use std::path::PathBuf;
 /// Arguments of `qicp match`.
 #[derive(Debug, clap::Args)]
 pub struct MatchArgs {
-    /// CARMEN log (plain or .bz2).
-    pub log: PathBuf,
+    /// CARMEN log (plain or .bz2); not with --subscribe.
+    #[arg(required_unless_present = "subscribe")]
+    pub log: Option<PathBuf>,
     /// Matcher kind: idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm. Overrides the config's kind.
     #[arg(long)]
     pub matcher: Option<MatcherKind>,
     /// TOML file with a `[matcher]` table (kind and parameters).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Output directory.
-    #[arg(long)]
-    pub out: PathBuf,
+    /// Output directory (optional with --subscribe).
+    #[arg(long, required_unless_present = "subscribe")]
+    pub out: Option<PathBuf>,
     /// Skip and count malformed log lines instead of failing.
     #[arg(long)]
     pub lenient: bool,
@@ -29,6 +30,9 @@ pub struct MatchArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Take the scans from the iceoryx2 bridge instead of a log.
+    #[command(flatten)]
+    pub bridge: crate::bridge_cmd::SubscribeArgs,
 }
 
 /// Loads the matcher config: a file, a kind, or both (the kind overrides the file's).
@@ -53,8 +57,19 @@ pub fn load_config(file: Option<&PathBuf>, kind: Option<MatcherKind>) -> Result<
 /// Runs the command.
 pub fn run(args: MatchArgs) -> Result<()> {
     let config = load_config(args.config.as_ref(), args.matcher)?;
+    if args.bridge.subscribe {
+        return crate::bridge_cmd::run_subscribe(
+            &config,
+            args.out.as_deref(),
+            args.json,
+            &args.bridge,
+        );
+    }
+    let (Some(log_path), Some(out)) = (&args.log, &args.out) else {
+        bail!("give a LOG and --out DIR (or --subscribe)");
+    };
     let log = read_carmen(
-        &args.log,
+        log_path,
         &CarmenOptions {
             lenient: args.lenient,
             ..CarmenOptions::default()
@@ -67,7 +82,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
         );
     }
     let run = run_matcher(&log.records, &config, true)?;
-    write_run(&args.out, &run, &config)?;
+    write_run(out, &run, &config)?;
     let mut summary = serde_json::to_value(&run.summary)?;
     summary["skipped_lines"] = log.skipped_lines.into();
     if let Some(path) = &args.relations {
@@ -76,7 +91,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
         summary["relations"] = serde_json::to_value(report)?;
     }
     let text = serde_json::to_string_pretty(&summary)?;
-    std::fs::write(args.out.join("summary.json"), &text)?;
+    std::fs::write(out.join("summary.json"), &text)?;
     if args.json {
         println!("{text}");
     } else {

@@ -22,15 +22,18 @@ use crate::logs::{carmen::write_carmen, tum::write_tum};
 pub struct SimArgs {
     /// The drive's TOML configuration, e.g. `configs/worlds/park.toml`.
     pub config: PathBuf,
-    /// Output directory (created if missing).
-    #[arg(long)]
-    pub out: PathBuf,
+    /// Output directory (created if missing); not with --publish.
+    #[arg(long, required_unless_present = "publish", conflicts_with = "publish")]
+    pub out: Option<PathBuf>,
     /// Override `[drive] seed` (laser and encoder noise).
     #[arg(long)]
     pub seed: Option<u64>,
     /// Override `[drive] max_scans`: stop after this many scans.
     #[arg(long)]
     pub max_scans: Option<usize>,
+    /// Publish the scans through the iceoryx2 bridge instead of writing files.
+    #[command(flatten)]
+    pub bridge: crate::bridge_cmd::PublishArgs,
 }
 
 /// Runs the command.
@@ -43,8 +46,15 @@ pub fn run(a: SimArgs) -> Result<()> {
         cfg.drive.max_scans = a.max_scans;
     }
     cfg.validate()?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("creating output directory {}", a.out.display()))?;
+    if a.bridge.publish {
+        let beams = cfg.laser.beams;
+        let sim = Simulation::new(cfg)?.map(|r| r.map_err(anyhow::Error::from));
+        let report = crate::bridge_cmd::publish_records(sim, beams, &a.bridge)?;
+        return crate::bridge_cmd::print_publish_report(&report);
+    }
+    let out = a.out.clone().context("--out is required")?;
+    std::fs::create_dir_all(&out)
+        .with_context(|| format!("creating output directory {}", out.display()))?;
 
     let started = Instant::now();
     let mut sim = Simulation::new(cfg.clone())?;
@@ -70,16 +80,16 @@ pub fn run(a: SimArgs) -> Result<()> {
         .iter()
         .map(|r| (r.timestamp(), r.odometry))
         .collect();
-    write_file(&a.out.join("sim.log"), |w| write_carmen(w, &records))?;
-    write_file(&a.out.join("groundtruth.tum"), |w| write_tum(w, &truth))?;
-    write_file(&a.out.join("odometry.tum"), |w| write_tum(w, &odometry))?;
+    write_file(&out.join("sim.log"), |w| write_carmen(w, &records))?;
+    write_file(&out.join("groundtruth.tum"), |w| write_tum(w, &truth))?;
+    write_file(&out.join("odometry.tum"), |w| write_tum(w, &odometry))?;
     let truth_poses: Vec<Pose2> = truth.iter().map(|p| p.1).collect();
     let odom_poses: Vec<Pose2> = odometry.iter().map(|p| p.1).collect();
-    write_file(&a.out.join("world.png"), |w| {
+    write_file(&out.join("world.png"), |w| {
         render::write_png(w, sim.world(), &truth_poses, &odom_poses)
     })?;
     let effective = cfg.to_toml_string()?;
-    write_file(&a.out.join("config.toml"), |w| {
+    write_file(&out.join("config.toml"), |w| {
         w.write_all(effective.as_bytes())
     })?;
 
@@ -108,7 +118,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         "digest": format!("{:016x}", qicp_sim::digest(&records)),
         "world_png": render::LEGEND,
     });
-    write_file(&a.out.join("summary.json"), |mut w| {
+    write_file(&out.join("summary.json"), |mut w| {
         serde_json::to_writer_pretty(&mut w, &summary)?;
         writeln!(w)
     })?;

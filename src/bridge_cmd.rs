@@ -1,0 +1,691 @@
+//! The bridge commands: scans and poses between processes over iceoryx2 (crate `qicp-bridge`).
+//!
+//! - `qicp sim CONFIG --publish [--rate realtime|max|Nx]`: publish a simulated drive;
+//! - `qicp replay LOG --publish [--rate …]`: publish a CARMEN log;
+//! - `qicp match --subscribe [--matcher KIND] [--out DIR]`: match the scans of whoever
+//!   publishes, publish the poses, write the outputs of `qicp match`;
+//! - `qicp bench bridge [--json]`: one-way latency and throughput, iceoryx2 against a
+//!   Unix-domain socket carrying the same bytes.
+//!
+//! Services: `<prefix>/scan` and `<prefix>/pose` (`--service-prefix`, default `qicp`).
+
+use crate::logs::carmen::{CarmenOptions, read_carmen};
+use crate::matching::{Matching, quantile, write_run};
+use anyhow::{Context, Result, bail};
+use qicp_bridge::{
+    BackPressure, PoseMessage, PosePublisher, PublisherOptions, ScanHeader, ScanPublisher,
+    ScanSubscriber, StreamEnd, StreamEvent, StreamReport, SubscriberOptions, Topics, WaitOptions,
+};
+use qicp_core::Record;
+use qicp_matchers::MatcherConfig;
+use serde::Serialize;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// How fast a recorded or simulated drive is published.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rate {
+    /// At the pace of the record timestamps.
+    Realtime,
+    /// As fast as the subscribers take them (back-pressure permitting).
+    Max,
+    /// `N` times the pace of the timestamps (`--rate 10x`).
+    Factor(f64),
+}
+
+impl std::str::FromStr for Rate {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "realtime" => Ok(Rate::Realtime),
+            "max" => Ok(Rate::Max),
+            other => other
+                .strip_suffix('x')
+                .and_then(|f| f.parse::<f64>().ok())
+                .filter(|f| f.is_finite() && *f > 0.0)
+                .map(Rate::Factor)
+                .ok_or_else(|| format!("bad rate {other:?}: use realtime, max or a factor like 10x")),
+        }
+    }
+}
+
+impl Rate {
+    fn speed(self) -> Option<f64> {
+        match self {
+            Rate::Realtime => Some(1.0),
+            Rate::Max => None,
+            Rate::Factor(f) => Some(f),
+        }
+    }
+}
+
+/// Publisher flags shared by `qicp sim --publish` and `qicp replay --publish`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PublishArgs {
+    /// Publish the scans on `<prefix>/scan` instead of writing files.
+    #[arg(long)]
+    pub publish: bool,
+    /// Pace: realtime, max, or a speed-up factor such as 10x.
+    #[arg(long, default_value = "max", requires = "publish")]
+    pub rate: Rate,
+    /// block (lossless, waits for slow subscribers) or drop-oldest (live: subscribers count
+    /// what they miss).
+    #[arg(long, default_value = "block", requires = "publish")]
+    pub backpressure: BackPressure,
+    /// Service prefix: services `<prefix>/scan` and `<prefix>/pose`.
+    #[arg(long, default_value = qicp_bridge::DEFAULT_PREFIX)]
+    pub service_prefix: String,
+    /// Subscribers to wait for before the first scan (default: 1 in block mode, 0 in
+    /// drop-oldest mode).
+    #[arg(long)]
+    pub wait_subscribers: Option<usize>,
+    /// Seconds to wait for them.
+    #[arg(long, default_value_t = 60.0)]
+    pub connect_timeout: f64,
+    /// Seconds to wait after the end-of-stream marker for the subscribers to leave.
+    #[arg(long, default_value_t = 10.0)]
+    pub linger: f64,
+    /// Seconds one send may wait for a full subscriber in block mode before failing.
+    #[arg(long, default_value_t = 30.0)]
+    pub block_timeout: f64,
+}
+
+/// What a publisher reports at its end (printed as JSON on stdout).
+#[derive(Debug, Clone, Serialize)]
+pub struct PublishReport {
+    /// The scan service.
+    pub service: String,
+    /// Back-pressure mode.
+    pub backpressure: String,
+    /// Scans published.
+    pub published: u64,
+    /// Sends that found a subscriber full and waited (block mode).
+    pub blocked_sends: u64,
+    /// Whether SIGINT/SIGTERM cut the drive short (the end marker is still sent).
+    pub interrupted: bool,
+    /// Whether every subscriber left before the linger timeout.
+    pub subscribers_left: bool,
+    /// Wall time from the first scan to the end marker (s).
+    pub wall_seconds: f64,
+}
+
+fn secs(s: f64) -> Duration {
+    Duration::from_secs_f64(s.max(0.0))
+}
+
+/// Publishes `records` (in time order) on `<prefix>/scan`, then the end-of-stream marker.
+pub fn publish_records(
+    records: impl Iterator<Item = Result<Record>>,
+    beams: usize,
+    args: &PublishArgs,
+) -> Result<PublishReport> {
+    let topics = Topics::new(&args.service_prefix);
+    let mut publisher = ScanPublisher::create(
+        &topics,
+        &PublisherOptions {
+            backpressure: args.backpressure,
+            beams,
+            block_timeout: secs(args.block_timeout),
+        },
+    )?;
+    let want = args.wait_subscribers.unwrap_or(match args.backpressure {
+        BackPressure::Block => 1,
+        BackPressure::DropOldest => 0,
+    });
+    if want > 0 {
+        eprintln!("waiting for {want} subscriber(s) on {}", topics.scan());
+        if !publisher.wait_for_subscribers(want, secs(args.connect_timeout))? {
+            if publisher.interrupted() {
+                bail!("interrupted while waiting for subscribers");
+            }
+            bail!(
+                "no subscriber on {} within {} s (--connect-timeout)",
+                topics.scan(),
+                args.connect_timeout
+            );
+        }
+    }
+    let started = Instant::now();
+    let mut first_timestamp = None;
+    let mut interrupted = false;
+    for record in records {
+        let record = record?;
+        if let Some(speed) = args.rate.speed() {
+            let t0 = *first_timestamp.get_or_insert(record.timestamp());
+            let due = secs((record.timestamp() - t0) / speed);
+            if let Some(wait) = due.checked_sub(started.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        if publisher.interrupted() {
+            interrupted = true;
+            break;
+        }
+        publisher.publish(&record)?;
+    }
+    publisher.end_of_stream()?;
+    let wall_seconds = started.elapsed().as_secs_f64();
+    let subscribers_left = publisher.linger(secs(args.linger))?;
+    Ok(PublishReport {
+        service: topics.scan(),
+        backpressure: publisher.backpressure().name().to_string(),
+        published: publisher.sent(),
+        blocked_sends: publisher.blocked_sends(),
+        interrupted,
+        subscribers_left,
+        wall_seconds,
+    })
+}
+
+/// Prints a publisher's report on stdout.
+pub fn print_publish_report(report: &PublishReport) -> Result<()> {
+    println!("{}", serde_json::to_string_pretty(report)?);
+    Ok(())
+}
+
+/// Arguments of `qicp replay`.
+#[derive(Debug, clap::Args)]
+pub struct ReplayArgs {
+    /// CARMEN log (plain or .bz2).
+    pub log: PathBuf,
+    /// Skip and count malformed log lines instead of failing.
+    #[arg(long)]
+    pub lenient: bool,
+    /// Publisher flags (`--publish` is required: replay has no other output).
+    #[command(flatten)]
+    pub bridge: PublishArgs,
+}
+
+/// Runs `qicp replay`.
+pub fn run_replay(args: ReplayArgs) -> Result<()> {
+    if !args.bridge.publish {
+        bail!("qicp replay publishes a log: give --publish");
+    }
+    let log = read_carmen(
+        &args.log,
+        &CarmenOptions {
+            lenient: args.lenient,
+            ..CarmenOptions::default()
+        },
+    )?;
+    if log.skipped_lines > 0 {
+        eprintln!(
+            "warning: skipped {} malformed lines (--lenient)",
+            log.skipped_lines
+        );
+    }
+    let beams = log.records.first().map_or(1, |r| r.scan.beams());
+    let report = publish_records(log.records.into_iter().map(Ok), beams, &args.bridge)?;
+    print_publish_report(&report)
+}
+
+/// Subscriber flags of `qicp match --subscribe`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SubscribeArgs {
+    /// Match the scans published on `<prefix>/scan` (by `qicp sim --publish`, `qicp replay`
+    /// or a robot process) and publish the poses on `<prefix>/pose`.
+    #[arg(long, conflicts_with = "log")]
+    pub subscribe: bool,
+    /// Service prefix.
+    #[arg(long = "service-prefix", default_value = qicp_bridge::DEFAULT_PREFIX)]
+    pub prefix: String,
+    /// Scans sent before this subscriber started that it asks for (at most
+    /// qicp_bridge::SCAN_HISTORY_MAX = 64).
+    #[arg(long, default_value_t = 0)]
+    pub history: usize,
+    /// Subscriber buffer (scans); in block mode the publisher runs at most this far ahead.
+    #[arg(long, default_value_t = 64)]
+    pub buffer: usize,
+    /// Require this back-pressure mode (default: adopt the publisher's; block if first).
+    #[arg(long)]
+    pub backpressure: Option<BackPressure>,
+    /// Seconds to wait for a publisher to appear.
+    #[arg(long, default_value_t = 60.0)]
+    pub connect_timeout: f64,
+    /// Seconds to wait for a new publisher after one was lost.
+    #[arg(long, default_value_t = 10.0)]
+    pub reconnect_timeout: f64,
+    /// Seconds without a scan, a publisher being connected, before giving up.
+    #[arg(long, default_value_t = 120.0)]
+    pub idle_timeout: f64,
+    /// Sleep this long after each scan (tests: a slow subscriber).
+    #[arg(long, default_value_t = 0, hide = true)]
+    pub delay_ms: u64,
+}
+
+/// The bridge figures added to `summary.json` under `"bridge"`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SubscribeSummary {
+    /// The scan service.
+    pub service: String,
+    /// The service's back-pressure mode.
+    pub backpressure: String,
+    /// How the stream ended (`end_of_stream`, `publisher_lost`, `no_publisher`, `idle`,
+    /// `interrupted`).
+    pub end: String,
+    /// Scans received.
+    pub received: u64,
+    /// Scans sent before this subscriber joined that it did not get.
+    pub missed_before_join: u64,
+    /// Jumps in the sequence numbers.
+    pub gap_events: u64,
+    /// Scans lost in them.
+    pub missing: u64,
+    /// Scans received out of order (ignored).
+    pub out_of_order: u64,
+    /// Publishers seen (a restart counts again).
+    pub publishers_seen: u64,
+    /// Publishers that vanished without an end-of-stream marker.
+    pub publishers_lost: u64,
+    /// Scans the last publisher announced in its end marker.
+    pub announced: Option<u64>,
+    /// Scans whose message could not be turned into a scan (bad geometry, NaN time).
+    pub rejected: u64,
+    /// Poses published on `<prefix>/pose`.
+    pub poses_published: u64,
+}
+
+impl SubscribeSummary {
+    fn of(
+        report: &StreamReport,
+        service: String,
+        backpressure: BackPressure,
+        rejected: u64,
+        poses: u64,
+    ) -> Self {
+        Self {
+            service,
+            backpressure: backpressure.name().to_string(),
+            end: report.end.map_or("running", StreamEnd::name).to_string(),
+            received: report.received,
+            missed_before_join: report.missed_before_join,
+            gap_events: report.gap_events,
+            missing: report.missing,
+            out_of_order: report.out_of_order,
+            publishers_seen: report.publishers_seen,
+            publishers_lost: report.publishers_lost,
+            announced: report.announced,
+            rejected,
+            poses_published: poses,
+        }
+    }
+}
+
+/// Runs `qicp match --subscribe`: matches every scan received, publishes its pose, and at the
+/// end writes what `qicp match` writes (when `out` is given) plus the stream's figures.
+///
+/// Returns an error (after writing the outputs) when the stream did not end with its marker:
+/// publisher lost, none appeared, or it went idle.
+pub fn run_subscribe(
+    config: &MatcherConfig,
+    out: Option<&Path>,
+    json: bool,
+    args: &SubscribeArgs,
+) -> Result<()> {
+    let topics = Topics::new(&args.prefix);
+    let scans = ScanSubscriber::create(
+        &topics,
+        &SubscriberOptions {
+            history: args.history,
+            buffer: args.buffer,
+            backpressure: args.backpressure,
+            wait: WaitOptions {
+                connect_timeout: secs(args.connect_timeout),
+                reconnect_timeout: secs(args.reconnect_timeout),
+                idle_timeout: secs(args.idle_timeout),
+                ..WaitOptions::default()
+            },
+        },
+    )?;
+    let backpressure = scans.backpressure();
+    let mut poses = PosePublisher::create(&topics)?;
+    let mut matching = Matching::new(config)?;
+    let mut rejected = 0u64;
+    let mut publish_error = None;
+    eprintln!(
+        "matching scans from {} ({} mode) with {}",
+        topics.scan(),
+        backpressure.name(),
+        config.kind.name()
+    );
+    let report = scans.run(|event| {
+        match event {
+            StreamEvent::Data(view) => match view.header.to_record(view.ranges) {
+                Ok(record) => {
+                    let estimate = matching.push(&record);
+                    let message = PoseMessage::of(
+                        0,
+                        view.header.seq,
+                        record.timestamp(),
+                        estimate.pose,
+                        &estimate.result,
+                        estimate.inserted,
+                    );
+                    if let Err(e) = poses.publish(message) {
+                        publish_error = Some(e);
+                        return ControlFlow::Break(());
+                    }
+                }
+                Err(e) => {
+                    rejected += 1;
+                    eprintln!("warning: scan {} rejected: {e}", view.header.seq);
+                }
+            },
+            StreamEvent::PublisherJoined { skipped } if skipped > 0 => {
+                eprintln!("publisher joined; {skipped} scans were sent before this subscriber")
+            }
+            StreamEvent::PublisherJoined { .. } => eprintln!("publisher joined"),
+            StreamEvent::PublisherLost => eprintln!(
+                "publisher lost without end-of-stream; waiting {} s for a new one",
+                args.reconnect_timeout
+            ),
+            StreamEvent::Gap { missing } => eprintln!("gap: {missing} scans lost"),
+        }
+        if args.delay_ms > 0 {
+            std::thread::sleep(Duration::from_millis(args.delay_ms));
+        }
+        ControlFlow::Continue(())
+    })?;
+    // Leave the scan stream first: a lingering publisher may exit now.
+    drop(scans);
+    if let Some(e) = publish_error {
+        return Err(e).context("publishing a pose");
+    }
+    poses.end_of_stream().context("ending the pose stream")?;
+
+    let run = matching.finish();
+    let bridge = SubscribeSummary::of(&report, topics.scan(), backpressure, rejected, poses.sent());
+    let mut summary = serde_json::to_value(&run.summary)?;
+    summary["bridge"] = serde_json::to_value(&bridge)?;
+    let text = serde_json::to_string_pretty(&summary)?;
+    if let Some(out) = out {
+        write_run(out, &run, config)?;
+        std::fs::write(out.join("summary.json"), &text).context("writing summary.json")?;
+    }
+    if json {
+        println!("{text}");
+    } else {
+        eprintln!("{text}");
+    }
+    // Give pose subscribers a moment to read the tail before this process's memory goes.
+    poses.linger(Duration::from_secs(5))?;
+    match report.end {
+        Some(StreamEnd::EndOfStream | StreamEnd::Interrupted | StreamEnd::Stopped) => Ok(()),
+        Some(end) => bail!(
+            "scan stream ended without its end marker ({}); outputs cover the {} scans received",
+            end.name(),
+            report.received
+        ),
+        None => Ok(()),
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// qicp bench bridge
+
+/// Arguments of `qicp bench bridge`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct BridgeBenchArgs {
+    /// Messages per latency run (each waits for the previous one to arrive).
+    #[arg(long, default_value_t = 2000)]
+    pub messages: usize,
+    /// Messages per throughput run (sent back to back).
+    #[arg(long, default_value_t = 20000)]
+    pub burst: usize,
+    /// Beams per scan.
+    #[arg(long, default_value_t = 181)]
+    pub beams: usize,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One transport's figures.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct TransportFigures {
+    /// Median one-way latency (µs).
+    pub p50_us: f64,
+    /// 99th percentile one-way latency (µs).
+    pub p99_us: f64,
+    /// Messages per second, sent back to back.
+    pub msgs_per_s: f64,
+}
+
+/// Result of `qicp bench bridge`.
+#[derive(Debug, Clone, Serialize)]
+pub struct BridgeBenchReport {
+    /// Through iceoryx2 (`ScanPublisher` → `ScanSubscriber`, WaitSet wake-up).
+    pub iceoryx2: TransportFigures,
+    /// Through a Unix-domain stream socket (blocking read wake-up), same bytes.
+    pub uds: TransportFigures,
+    /// Beams per scan.
+    pub beams: usize,
+    /// Bytes per message (header + ranges).
+    pub bytes: usize,
+    /// Messages per latency run.
+    pub messages: usize,
+    /// Messages per throughput run.
+    pub burst: usize,
+    /// `iceoryx2.p50_us / uds.p50_us`.
+    pub p50_ratio: f64,
+}
+
+/// Runs `qicp bench bridge`.
+pub fn run_bench(args: &BridgeBenchArgs) -> Result<()> {
+    let report = bridge_bench(args)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{:<10} {:>10} {:>10} {:>14}",
+            "transport", "p50 µs", "p99 µs", "msgs/s"
+        );
+        for (name, f) in [("iceoryx2", report.iceoryx2), ("uds", report.uds)] {
+            println!(
+                "{name:<10} {:>10.2} {:>10.2} {:>14.0}",
+                f.p50_us, f.p99_us, f.msgs_per_s
+            );
+        }
+        println!(
+            "{} beams, {} bytes per message; p50 ratio iceoryx2/uds = {:.2}",
+            report.beams, report.bytes, report.p50_ratio
+        );
+    }
+    Ok(())
+}
+
+/// Both transports, one after the other, in one run.
+pub fn bridge_bench(args: &BridgeBenchArgs) -> Result<BridgeBenchReport> {
+    anyhow::ensure!(args.beams > 0 && args.messages > 0 && args.burst > 0, "empty bench");
+    let ranges: Vec<f64> = (0..args.beams).map(|i| 1.0 + i as f64 * 0.01).collect();
+    let iceoryx2 = TransportFigures::of(
+        &iceoryx2_run(&ranges, args.messages, true)?,
+        iceoryx2_run(&ranges, args.burst, false)?,
+    );
+    let uds = TransportFigures::of(
+        &uds_run(&ranges, args.messages, true)?,
+        uds_run(&ranges, args.burst, false)?,
+    );
+    Ok(BridgeBenchReport {
+        iceoryx2,
+        uds,
+        beams: args.beams,
+        bytes: std::mem::size_of::<ScanHeader>() + 8 * args.beams,
+        messages: args.messages,
+        burst: args.burst,
+        p50_ratio: iceoryx2.p50_us / uds.p50_us,
+    })
+}
+
+/// One run's measurements: one-way latencies (µs) or the elapsed time of a burst.
+struct RunTimes {
+    latencies_us: Vec<f64>,
+    elapsed: Duration,
+    messages: usize,
+}
+
+impl TransportFigures {
+    fn of(latency: &RunTimes, burst: RunTimes) -> Self {
+        Self {
+            p50_us: quantile(&latency.latencies_us, 0.5),
+            p99_us: quantile(&latency.latencies_us, 0.99),
+            msgs_per_s: burst.messages as f64 / burst.elapsed.as_secs_f64().max(1e-12),
+        }
+    }
+}
+
+/// The clock both threads stamp with: seconds since a shared `Instant`.
+fn stamp(epoch: Instant) -> f64 {
+    epoch.elapsed().as_secs_f64()
+}
+
+/// iceoryx2: publisher thread → this thread's `ScanSubscriber`. With `paced`, each message
+/// is sent after the previous one arrived (latency: every message pays a wake-up); without,
+/// back to back (throughput).
+fn iceoryx2_run(ranges: &[f64], messages: usize, paced: bool) -> Result<RunTimes> {
+    let topics = Topics::new(&format!(
+        "qicp-bench-{}-{}",
+        std::process::id(),
+        if paced { "latency" } else { "burst" }
+    ));
+    let subscriber = ScanSubscriber::create(
+        &topics,
+        &SubscriberOptions {
+            buffer: 64,
+            backpressure: Some(BackPressure::Block),
+            wait: WaitOptions {
+                connect_timeout: Duration::from_secs(10),
+                reconnect_timeout: Duration::from_secs(2),
+                idle_timeout: Duration::from_secs(10),
+                ..WaitOptions::default()
+            },
+            ..SubscriberOptions::default()
+        },
+    )?;
+    let epoch = Instant::now();
+    let (ack_tx, ack_rx) = std::sync::mpsc::sync_channel::<()>(1);
+    let owned = ranges.to_vec();
+    let publisher = std::thread::spawn(move || -> Result<f64> {
+        let mut p = ScanPublisher::create(
+            &topics,
+            &PublisherOptions {
+                beams: owned.len(),
+                ..PublisherOptions::default()
+            },
+        )?;
+        if !p.wait_for_subscribers(1, Duration::from_secs(10))? {
+            bail!("bench subscriber did not connect");
+        }
+        let first_send = stamp(epoch);
+        let header = ScanHeader {
+            angle_increment: 0.01,
+            max_range: 80.0,
+            ..ScanHeader::default()
+        };
+        for _ in 0..messages {
+            let h = ScanHeader {
+                timestamp: stamp(epoch),
+                ..header
+            };
+            p.publish_with(h, owned.len(), |i| owned[i])?;
+            if paced {
+                ack_rx
+                    .recv_timeout(Duration::from_secs(10))
+                    .context("bench subscriber stalled")?;
+            }
+        }
+        p.end_of_stream()?;
+        p.linger(Duration::from_secs(10))?;
+        Ok(first_send)
+    });
+    let mut latencies_us = Vec::with_capacity(messages);
+    let mut checksum = 0.0;
+    let mut last_receive = 0.0;
+    let report = subscriber.run(|event| {
+        if let StreamEvent::Data(view) = event {
+            last_receive = stamp(epoch);
+            latencies_us.push((last_receive - view.header.timestamp) * 1e6);
+            // Touch every range, as the socket reader must.
+            checksum += view.ranges.iter().sum::<f64>();
+            if paced {
+                let _ = ack_tx.try_send(());
+            }
+        }
+        ControlFlow::Continue(())
+    })?;
+    drop(subscriber);
+    let first_send = publisher
+        .join()
+        .map_err(|_| anyhow::anyhow!("bench publisher panicked"))??;
+    anyhow::ensure!(
+        report.is_complete() && report.received == messages as u64,
+        "bench stream incomplete: {report:?}"
+    );
+    std::hint::black_box(checksum);
+    Ok(RunTimes {
+        latencies_us,
+        elapsed: secs(last_receive - first_send),
+        messages,
+    })
+}
+
+/// The socket baseline: the same header and ranges, serialised into one frame per message,
+/// written to a Unix-domain stream socket and read back by a thread blocked in `read`.
+fn uds_run(ranges: &[f64], messages: usize, paced: bool) -> Result<RunTimes> {
+    use std::io::{Read, Write};
+    let header_bytes = std::mem::size_of::<ScanHeader>();
+    let frame = header_bytes + 8 * ranges.len();
+    let (mut writer, mut reader) = std::os::unix::net::UnixStream::pair()?;
+    reader.set_read_timeout(Some(Duration::from_secs(10)))?;
+    let epoch = Instant::now();
+    let (ack_tx, ack_rx) = std::sync::mpsc::sync_channel::<()>(1);
+    let owned = ranges.to_vec();
+    let sender = std::thread::spawn(move || -> Result<f64> {
+        let mut buf = vec![0u8; frame];
+        let first_send = stamp(epoch);
+        for seq in 0..messages as u64 {
+            // Serialise as the header would lie in memory: seq at 8, timestamp at 16,
+            // beams at 128, ranges after the 136-byte header.
+            buf[8..16].copy_from_slice(&seq.to_le_bytes());
+            buf[16..24].copy_from_slice(&stamp(epoch).to_le_bytes());
+            buf[128..132].copy_from_slice(&(owned.len() as u32).to_le_bytes());
+            for (chunk, r) in buf[header_bytes..].chunks_exact_mut(8).zip(&owned) {
+                chunk.copy_from_slice(&r.to_le_bytes());
+            }
+            writer.write_all(&buf)?;
+            if paced {
+                ack_rx
+                    .recv_timeout(Duration::from_secs(10))
+                    .context("socket reader stalled")?;
+            }
+        }
+        Ok(first_send)
+    });
+    let mut buf = vec![0u8; frame];
+    let mut latencies_us = Vec::with_capacity(messages);
+    let mut checksum = 0.0;
+    let mut last_receive = 0.0;
+    for _ in 0..messages {
+        reader.read_exact(&mut buf)?;
+        last_receive = stamp(epoch);
+        let sent = f64::from_le_bytes(buf[16..24].try_into()?);
+        latencies_us.push((last_receive - sent) * 1e6);
+        checksum += buf[header_bytes..]
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().unwrap_or_default()))
+            .sum::<f64>();
+        if paced {
+            let _ = ack_tx.try_send(());
+        }
+    }
+    let first_send = sender
+        .join()
+        .map_err(|_| anyhow::anyhow!("socket writer panicked"))??;
+    std::hint::black_box(checksum);
+    Ok(RunTimes {
+        latencies_us,
+        elapsed: secs(last_receive - first_send),
+        messages,
+    })
+}
