@@ -447,7 +447,17 @@ impl Scores {
             None => None,
         };
         let relations = match &source.relations {
-            Some(rel) => Some(evaluate_relations(traj, rel, crate::eval::DEFAULT_MAX_DT)?),
+            Some(rel) => {
+                let r = evaluate_relations(traj, rel, crate::eval::DEFAULT_MAX_DT)?;
+                if r.n == 0 {
+                    eprintln!(
+                        "warning: none of the {} relations falls on this log's times: \
+                         are they the log's?",
+                        rel.len()
+                    );
+                }
+                Some(r)
+            }
             None => None,
         };
         Ok(Self { ate, relations })
@@ -584,7 +594,11 @@ pub fn run(args: RunArgs) -> Result<()> {
     if let Some(log) = &args.log {
         config.source.sim = None;
         config.source.seed = None;
-        config.source.log = Some(std::path::absolute(log).unwrap_or_else(|_| log.clone()));
+        config.source.log = Some(
+            std::fs::canonicalize(log)
+                .or_else(|_| std::path::absolute(log))
+                .unwrap_or_else(|_| log.clone()),
+        );
     }
     if args.max_scans.is_some() {
         config.source.max_scans = args.max_scans;
