@@ -59,6 +59,9 @@ impl CorrespondenceMetric for ClosestPoint {
     }
 }
 
+/// Slack of the matching-range rule's search radius beyond r·window (m).
+const RANGE_RULE_MARGIN: f64 = 0.1;
+
 /// IDC's matching-range rule (Lu & Milios 1997, Sec. 4.2): in polar coordinates about the
 /// sensor, a scan point at (r, φ) pairs with the reference point inside the angular window
 /// φ ± `window` whose range is closest to r. Like every pair it must lie within the outlier
@@ -94,7 +97,12 @@ impl CorrespondenceMetric for MatchingRange {
                 continue;
             }
             let u = d / r;
-            reference.within_radius(p, query.max_dist, &mut self.scratch);
+            // The best candidate (nearly equal range, inside the window) lies within about
+            // r·window of p; farther ones differ in range and lose anyway.
+            let reach = query
+                .max_dist
+                .min(r * self.window.min(1.0) + RANGE_RULE_MARGIN);
+            reference.within_radius(p, reach, &mut self.scratch);
             let mut best: Option<(f64, PointId, f64)> = None;
             for n in &self.scratch {
                 let e = n.point - o;

@@ -183,16 +183,18 @@ impl<I: SpatialIndex> Reference<I> {
 
     /// Inserts the points of `scan`, seen from `pose` (the laser's pose in the reference frame).
     ///
-    /// When `densify` is set, each new point's spacing is lowered to its distance from the
-    /// nearest point already held (and that point's likewise), so a surface seen many times
-    /// reports the finer sampling it now has. Returns the number of points inserted; on error
+    /// `merge` is `None` for a plain insertion (a scan as reference). With `Some(resolution)`
+    /// the scan is merged into a map: each new point's spacing is lowered to its distance from
+    /// the nearest point already held (and that point's likewise), so a surface seen many times
+    /// reports the finer sampling it now has; a new point closer than `resolution` to one held
+    /// is not inserted (0 keeps every point). Returns the number of points inserted; on error
     /// nothing is inserted.
     pub fn insert_scan(
         &mut self,
         scan: &Scan,
         pose: &Pose2,
         noise: &LaserNoise,
-        densify: bool,
+        merge: Option<f64>,
     ) -> Result<usize, IndexError> {
         let local = scan_point_info(scan, noise);
         let rot = pose.rotation();
@@ -204,6 +206,7 @@ impl<I: SpatialIndex> Reference<I> {
         for (k, p) in global.iter().enumerate() {
             crate::index::check_point(p, self.index.len() + k)?;
         }
+        let mut inserted = 0;
         for (p, seen) in global.iter().zip(local) {
             let normal: Vector2<f64> = rot * seen.normal;
             let mut info = PointInfo {
@@ -211,19 +214,23 @@ impl<I: SpatialIndex> Reference<I> {
                 spacing: seen.spacing,
                 covariance: rot * seen.covariance * rot.transpose(),
             };
-            if densify {
-                let limit = info.spacing * info.spacing;
-                if let Some(n) = self.index.nearest_within(p, limit) {
+            if let Some(resolution) = merge {
+                let reach = info.spacing.max(resolution);
+                if let Some(n) = self.index.nearest_within(p, reach * reach) {
                     let d = n.dist_sq.sqrt().max(1e-4);
                     info.spacing = info.spacing.min(d);
                     let other = &mut self.info[n.id as usize];
-                    other.spacing = other.spacing.min(d);
+                    other.spacing = other.spacing.min(d.max(resolution));
+                    if d < resolution {
+                        continue;
+                    }
                 }
             }
             self.index.insert(*p)?;
             self.info.push(info);
+            inserted += 1;
         }
         self.scans += 1;
-        Ok(global.len())
+        Ok(inserted)
     }
 }

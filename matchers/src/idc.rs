@@ -121,18 +121,55 @@ impl<C: CorrespondenceMetric + Default> Idc<C> {
     }
 }
 
+impl<C: CorrespondenceMetric> Idc<C> {
+    /// Information of the current closest-point pairs at `pose`: each pair constrains the
+    /// pose along its surface normal (all directions where the normal is unknown), with the
+    /// variance σ² of the pair distances.
+    fn line_information<I: SpatialIndex>(
+        &self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+    ) -> Matrix3<f64> {
+        let refs = reference.index().points();
+        let info = reference.info();
+        let n = self.cp.len();
+        let sum_sq: f64 = self.cp.iter().map(|p| p.dist_sq).sum();
+        let sigma2 = (sum_sq / (2.0 * n as f64 - 3.0).max(1.0)).max(1e-8);
+        let rot = pose.rotation();
+        let t = pose.translation();
+        let mut ne = NormalEquations::default();
+        for p in &self.cp {
+            let normal = info[p.reference as usize].normal;
+            let w = if normal == qicp_core::Vector2::zeros() {
+                Matrix2::identity() / sigma2
+            } else {
+                normal * normal.transpose() / sigma2
+            };
+            ne.add(
+                &refs[p.reference as usize],
+                &(rot * local[p.scan as usize].coords),
+                &t,
+                &w,
+            );
+        }
+        ne.information()
+    }
+}
+
 impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
     fn name(&self) -> &'static str {
         "idc"
     }
 
-    /// IDC's least squares is unweighted: the prior is not used.
+    /// The prior (odometry) is fused with each iteration's estimate through the information
+    /// of the closest-point pairs.
     fn match_with_prior<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,
         scan: &Scan,
         guess: Pose2,
-        _prior: Option<Matrix3<f64>>,
+        prior: Option<Matrix3<f64>>,
     ) -> MatchResult {
         let local = scan.points();
         if local.len() < self.icp.min_correspondences {
@@ -141,7 +178,6 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         if reference.is_empty() {
             return MatchResult::fallback(guess, Fallback::EmptyReference);
         }
-        let refs = reference.index().points();
         self.closest.begin_scan(local);
         let mut pose = guess;
         let mut converged = false;
@@ -243,7 +279,20 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             }
             let r = Pose2::new(0.0, 0.0, theta).rotation();
             let t = ca / n - r * (cb / n);
-            let next = Pose2::new(t.x, t.y, theta);
+            let mut next = Pose2::new(t.x, t.y, theta);
+            if let Some(lambda) = &prior {
+                // Fuse with the odometry prior through the information of the pairs: the
+                // directions the scan leaves open (one trunk in view) keep odometry's estimate.
+                let h = self.line_information(reference, local, &next);
+                let d = qicp_core::Vector3::new(
+                    guess.x - next.x,
+                    guess.y - next.y,
+                    qicp_core::normalize_angle(guess.theta - next.theta),
+                );
+                if let Some(step) = (h + lambda).cholesky().map(|c| c.solve(&(lambda * d))) {
+                    next = crate::lsq::apply_step(&next, &step);
+                }
+            }
             let settled = self.icp.small_step(&pose, &next);
             pose = next;
             let final_stage =
@@ -253,7 +302,8 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
                 break;
             }
         }
-        // Covariance of point-to-point least squares: σ² (JᵀJ)⁻¹ with σ² from the residuals.
+        // Covariance of the point-to-line least squares (pairs are polyline feet, so only the
+        // normal direction carries information): σ² (JᵀWJ)⁻¹ with σ² from the residuals.
         move_points(&pose, local, &mut self.moved);
         let query = Query {
             local,
@@ -263,24 +313,14 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         };
         self.closest.pair(reference.index(), &query, &mut self.cp);
         let n = self.cp.len();
-        let rot = pose.rotation();
-        let t = pose.translation();
-        let sum_sq: f64 = self.cp.iter().map(|p| p.dist_sq).sum();
-        let sigma2 = (sum_sq / (2.0 * n as f64 - 3.0).max(1.0)).max(1e-8);
-        let mut ne = NormalEquations::default();
-        let w = Matrix2::identity() / sigma2;
-        for p in &self.cp {
-            ne.add(
-                &refs[p.reference as usize],
-                &(rot * local[p.scan as usize].coords),
-                &t,
-                &w,
-            );
+        let mut h = self.line_information(reference, local, &pose);
+        if let Some(lambda) = &prior {
+            h += lambda;
         }
-        let covariance = ne
-            .information()
+        let covariance = h
             .try_inverse()
-            .unwrap_or_else(|| qicp_core::Matrix3::from_diagonal_element(1.0));
+            .filter(|c| c.iter().all(|v| v.is_finite()))
+            .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0));
         MatchResult {
             pose,
             covariance,

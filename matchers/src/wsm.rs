@@ -147,7 +147,6 @@ impl<C: CorrespondenceMetric> Wsm<C> {
         local: &[Point2<f64>],
         scan_info: &[PointInfo],
         pose: &Pose2,
-        params: &WsmParams,
     ) -> NormalEquations {
         let refs = reference.index().points();
         let info = reference.info();
@@ -160,7 +159,7 @@ impl<C: CorrespondenceMetric> Wsm<C> {
             // P = C_a + R C_b Rᵀ + C_corr
             let cov = a.covariance
                 + rot * b.covariance * rot.transpose()
-                + params.correspondence_covariance(a);
+                + self.params.correspondence_covariance(a);
             let Some(w) = cov.try_inverse() else { continue };
             ne.add(
                 &refs[p.reference as usize],
@@ -226,7 +225,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
                 }
                 break;
             }
-            let mut ne = self.normal_equations(reference, local, &scan_info, &pose, &self.params);
+            let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
             add_prior(&mut ne, prior.as_ref(), &guess, &pose);
             let Some(step) = ne.solve() else {
                 return MatchResult::fallback(guess, Fallback::Degenerate);
@@ -249,13 +248,9 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
             max_dist: self.icp.max_dist_end,
         };
         self.metric.pair(reference.index(), &query, &mut self.pairs);
-        // The sliding term models the pose error still to be removed; at the estimate the
-        // correspondence error is Pfister's sampling term alone.
-        let converged_model = WsmParams {
-            sigma_slide: 0.0,
-            ..self.params
-        };
-        let mut ne = self.normal_equations(reference, local, &scan_info, &pose, &converged_model);
+        // The sliding term stays: without it a featureless corridor would claim to fix the
+        // pose along its axis to the sample spacing (tests/wsm_covariance.rs).
+        let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
         add_prior(&mut ne, prior.as_ref(), &guess, &pose);
         // Pfister et al.: covariance = H⁻¹, scaled by the a-posteriori variance factor so that
         // it also reflects how well the pairs actually fit (standard weighted least squares).

@@ -60,7 +60,7 @@ fn recovers_known_motion<M: ScanMatcher, I: SpatialIndex + Default>(mut matcher:
         let after = case.world.scan(&(case.from * case.motion), 0.005, 2);
         let mut reference = Reference::new(I::default());
         reference
-            .insert_scan(&before, &Pose2::IDENTITY, &LaserNoise::default(), false)
+            .insert_scan(&before, &Pose2::IDENTITY, &LaserNoise::default(), None)
             .unwrap();
         for error in guess_errors() {
             let guess = case.motion * error;
@@ -91,7 +91,7 @@ fn recovers_pose_in_map<M: ScanMatcher, I: SpatialIndex + Default>(mut matcher: 
                 &case.world.scan(&pose, 0.005, 10 + k),
                 &pose,
                 &LaserNoise::default(),
-                true,
+                Some(0.02),
             )
             .unwrap();
             pose = pose * Pose2::new(0.2, 0.0, 0.03);
