@@ -1,0 +1,337 @@
+//! The bridge end to end: `qicp sim --publish` and `qicp match --subscribe` as separate
+//! processes. Each test uses its own service prefix (so tests run in parallel), every wait
+//! has a timeout, and children are killed if a test fails.
+
+use qicp::matching::{Matching, write_run};
+use qicp_matchers::{MatcherConfig, MatcherKind};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+const QICP: &str = env!("CARGO_BIN_EXE_qicp");
+const PARK: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/worlds/park.toml");
+
+/// A child process killed when dropped (a failing test leaves nothing running).
+struct Proc {
+    child: Child,
+    name: &'static str,
+}
+
+impl Proc {
+    fn spawn(name: &'static str, args: &[&str]) -> Self {
+        let child = Command::new(QICP)
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| panic!("spawning {name}: {e}"));
+        Self { child, name }
+    }
+
+    /// Waits up to `timeout` for the exit; panics (killing it) on timeout.
+    fn wait(mut self, timeout: Duration) -> (ExitStatus, String, String) {
+        let deadline = Instant::now() + timeout;
+        loop {
+            match self.child.try_wait().expect("try_wait") {
+                Some(status) => {
+                    use std::io::Read;
+                    let mut out = String::new();
+                    let mut err = String::new();
+                    if let Some(mut s) = self.child.stdout.take() {
+                        let _ = s.read_to_string(&mut out);
+                    }
+                    if let Some(mut s) = self.child.stderr.take() {
+                        let _ = s.read_to_string(&mut err);
+                    }
+                    return (status, out, err);
+                }
+                None if Instant::now() > deadline => {
+                    let _ = self.child.kill();
+                    panic!("{} did not exit within {timeout:?} (hang)", self.name);
+                }
+                None => std::thread::sleep(Duration::from_millis(20)),
+            }
+        }
+    }
+
+    fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            self.kill();
+        }
+    }
+}
+
+fn prefix(test: &str) -> String {
+    format!("qicp-it-{}-{test}", std::process::id())
+}
+
+fn tempdir(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("qicp-bridge-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).expect("summary JSON")
+}
+
+fn bridge_u64(s: &serde_json::Value, key: &str) -> u64 {
+    s["bridge"][key]
+        .as_u64()
+        .unwrap_or_else(|| panic!("bridge.{key} missing in {s}"))
+}
+
+fn publisher_report(out: &str) -> serde_json::Value {
+    serde_json::from_str(out).unwrap_or_else(|e| panic!("publisher report {out:?}: {e}"))
+}
+
+/// The in-process run of the same drive and matcher, written like `qicp match`.
+fn in_process(max_scans: usize, kind: MatcherKind, dir: &Path) {
+    let mut cfg = qicp_sim::SimConfig::load(Path::new(PARK)).expect("park config");
+    cfg.drive.max_scans = Some(max_scans);
+    let (records, _, _) = qicp_sim::Simulation::run(cfg).expect("simulate");
+    let mut config = MatcherConfig::defaults(kind);
+    config.validate().expect("config");
+    config.fill_defaults();
+    let mut matching = Matching::new(&config).expect("matcher");
+    for r in &records {
+        matching.push(r);
+    }
+    write_run(dir, &matching.finish(), &config).expect("write run");
+}
+
+/// Drops the wall-time column (`ms`, 6th) of matches.csv: everything else must agree.
+fn without_timing(csv: &str) -> String {
+    csv.lines()
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(',').collect();
+            if f.len() > 5 {
+                f.remove(5);
+            }
+            f.join(",")
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn assert_same_run(a: &Path, b: &Path) {
+    let read = |d: &Path, f: &str| std::fs::read_to_string(d.join(f)).expect(f);
+    assert_eq!(
+        read(a, "trajectory.tum"),
+        read(b, "trajectory.tum"),
+        "trajectories differ"
+    );
+    assert_eq!(
+        without_timing(&read(a, "matches.csv")),
+        without_timing(&read(b, "matches.csv")),
+        "per-scan figures differ"
+    );
+}
+
+const T: Duration = Duration::from_secs(120);
+
+#[test]
+fn two_processes_reproduce_the_in_process_trajectory_in_either_start_order() {
+    let dir = tempdir("same");
+    let scans = 150;
+    in_process(scans, MatcherKind::QWsm, &dir.join("inproc"));
+    let n = scans.to_string();
+    for (order, subscriber_first) in [("sub-first", true), ("pub-first", false)] {
+        let p = prefix(order);
+        let out = dir.join(order);
+        let sub_args = [
+            "match", "--subscribe", "--matcher", "q-wsm", "--service-prefix", &p, "--out",
+        ];
+        let mut sub_args: Vec<&str> = sub_args.to_vec();
+        let out_s = out.to_string_lossy().to_string();
+        sub_args.push(&out_s);
+        let pub_args = ["sim", PARK, "--publish", "--max-scans", &n, "--service-prefix", &p];
+        let (sub, publ) = if subscriber_first {
+            let s = Proc::spawn("subscriber", &sub_args);
+            std::thread::sleep(Duration::from_millis(300));
+            (s, Proc::spawn("publisher", &pub_args))
+        } else {
+            let pb = Proc::spawn("publisher", &pub_args);
+            std::thread::sleep(Duration::from_millis(300));
+            (Proc::spawn("subscriber", &sub_args), pb)
+        };
+        let (ps, pout, perr) = publ.wait(T);
+        assert!(ps.success(), "publisher failed: {perr}");
+        let (ss, _, serr) = sub.wait(T);
+        assert!(ss.success(), "subscriber failed: {serr}");
+        let report = publisher_report(&pout);
+        assert_eq!(report["published"], scans as u64);
+        let s = summary(&out);
+        assert_eq!(s["bridge"]["end"], "end_of_stream");
+        assert_eq!(bridge_u64(&s, "received"), scans as u64);
+        assert_eq!(bridge_u64(&s, "missing"), 0);
+        assert_eq!(bridge_u64(&s, "poses_published"), scans as u64);
+        assert_same_run(&dir.join("inproc"), &out);
+    }
+}
+
+#[test]
+fn late_subscriber_gets_the_history_it_asked_for() {
+    let dir = tempdir("late");
+    let p = prefix("late");
+    // 40 scans at 10x the park's 1 Hz: 4 s; the subscriber joins after ~1.5 s.
+    let publ = Proc::spawn(
+        "publisher",
+        &["sim", PARK, "--publish", "--max-scans", "40", "--rate", "10x",
+          "--wait-subscribers", "0", "--service-prefix", &p],
+    );
+    std::thread::sleep(Duration::from_millis(1500));
+    let out = dir.join("sub");
+    let sub = Proc::spawn(
+        "subscriber",
+        &["match", "--subscribe", "--matcher", "idc", "--history", "10", "--service-prefix",
+          &p, "--out", &out.to_string_lossy()],
+    );
+    let (ps, _, perr) = publ.wait(T);
+    assert!(ps.success(), "publisher: {perr}");
+    let (ss, _, serr) = sub.wait(T);
+    assert!(ss.success(), "subscriber: {serr}");
+    let s = summary(&out);
+    let received = bridge_u64(&s, "received");
+    let missed = bridge_u64(&s, "missed_before_join");
+    assert_eq!(s["bridge"]["end"], "end_of_stream");
+    assert!(missed > 0, "joined late but missed nothing? {s}");
+    assert!(received >= 10, "history of 10 not delivered: {s}");
+    assert_eq!(received + missed, 40, "{s}");
+    assert_eq!(bridge_u64(&s, "missing"), 0);
+}
+
+#[test]
+fn killed_publisher_is_reported_and_the_subscriber_exits() {
+    let dir = tempdir("killed");
+    let p = prefix("killed");
+    let out = dir.join("sub");
+    let sub = Proc::spawn(
+        "subscriber",
+        &["match", "--subscribe", "--matcher", "idc", "--reconnect-timeout", "1",
+          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+    );
+    let mut publ = Proc::spawn(
+        "publisher",
+        &["sim", PARK, "--publish", "--max-scans", "200", "--rate", "20x",
+          "--service-prefix", &p],
+    );
+    std::thread::sleep(Duration::from_millis(1500));
+    publ.kill(); // SIGKILL: no end marker, no goodbye
+    let started = Instant::now();
+    let (ss, _, serr) = sub.wait(Duration::from_secs(30));
+    assert!(!ss.success(), "a lost publisher must fail the run: {serr}");
+    assert!(serr.contains("publisher lost"), "{serr}");
+    assert!(started.elapsed() < Duration::from_secs(15));
+    let s = summary(&out);
+    assert_eq!(s["bridge"]["end"], "publisher_lost");
+    assert_eq!(bridge_u64(&s, "publishers_lost"), 1);
+    let received = bridge_u64(&s, "received");
+    assert!(received > 0 && received < 200, "{s}");
+    assert_eq!(s["scans"].as_u64(), Some(received), "outputs cover what was received");
+}
+
+#[test]
+fn restarted_publisher_is_picked_up() {
+    let dir = tempdir("restart");
+    let p = prefix("restart");
+    let out = dir.join("sub");
+    let sub = Proc::spawn(
+        "subscriber",
+        &["match", "--subscribe", "--matcher", "idc", "--reconnect-timeout", "20",
+          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+    );
+    let mut first = Proc::spawn(
+        "publisher 1",
+        &["sim", PARK, "--publish", "--max-scans", "200", "--rate", "20x",
+          "--service-prefix", &p],
+    );
+    std::thread::sleep(Duration::from_millis(1200));
+    first.kill();
+    std::thread::sleep(Duration::from_millis(500));
+    let second = Proc::spawn(
+        "publisher 2",
+        &["sim", PARK, "--publish", "--max-scans", "25", "--service-prefix", &p],
+    );
+    let (ps, _, perr) = second.wait(T);
+    assert!(ps.success(), "second publisher: {perr}");
+    let (ss, _, serr) = sub.wait(T);
+    assert!(ss.success(), "subscriber: {serr}");
+    let s = summary(&out);
+    assert_eq!(s["bridge"]["end"], "end_of_stream");
+    assert_eq!(bridge_u64(&s, "publishers_seen"), 2, "{s}");
+    assert_eq!(bridge_u64(&s, "publishers_lost"), 1, "{s}");
+    assert_eq!(bridge_u64(&s, "missing"), 0, "{s}");
+    let received = bridge_u64(&s, "received");
+    assert!(received > 25 && received < 225, "{s}");
+}
+
+fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
+    let dir = tempdir(mode);
+    let p = prefix(mode);
+    let out = dir.join("sub");
+    let sub = Proc::spawn(
+        "subscriber",
+        &["match", "--subscribe", "--matcher", "idc", "--buffer", "4", "--delay-ms", "15",
+          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+    );
+    let publ = Proc::spawn(
+        "publisher",
+        &["sim", PARK, "--publish", "--max-scans", "80", "--rate", "max", "--backpressure",
+          mode, "--wait-subscribers", "1", "--service-prefix", &p],
+    );
+    let (ps, pout, perr) = publ.wait(T);
+    assert!(ps.success(), "publisher: {perr}");
+    let (ss, _, serr) = sub.wait(T);
+    assert!(ss.success(), "subscriber: {serr}");
+    (publisher_report(&pout), summary(&out))
+}
+
+#[test]
+fn slow_subscriber_in_block_mode_loses_nothing() {
+    let (report, s) = slow_subscriber("block");
+    assert_eq!(s["bridge"]["backpressure"], "block");
+    assert_eq!(bridge_u64(&s, "received"), 80, "{s}");
+    assert_eq!(bridge_u64(&s, "missing"), 0);
+    assert!(
+        report["blocked_sends"].as_u64().unwrap_or(0) > 0,
+        "the publisher never had to wait: {report}"
+    );
+}
+
+#[test]
+fn slow_subscriber_in_drop_oldest_mode_counts_what_it_lost() {
+    let (_, s) = slow_subscriber("drop-oldest");
+    assert_eq!(s["bridge"]["backpressure"], "drop-oldest");
+    assert_eq!(s["bridge"]["end"], "end_of_stream");
+    let received = bridge_u64(&s, "received");
+    let missing = bridge_u64(&s, "missing");
+    assert!(missing > 0 && bridge_u64(&s, "gap_events") > 0, "{s}");
+    assert_eq!(received + missing, 80, "every scan received or counted lost: {s}");
+    assert_eq!(bridge_u64(&s, "announced"), 80);
+}
+
+#[test]
+fn subscriber_without_publisher_times_out() {
+    let dir = tempdir("nobody");
+    let p = prefix("nobody");
+    let out = dir.join("sub");
+    let sub = Proc::spawn(
+        "subscriber",
+        &["match", "--subscribe", "--matcher", "idc", "--connect-timeout", "1",
+          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+    );
+    let (ss, _, serr) = sub.wait(Duration::from_secs(20));
+    assert!(!ss.success());
+    assert!(serr.contains("no_publisher"), "{serr}");
+    assert_eq!(summary(&out)["bridge"]["end"], "no_publisher");
+}
