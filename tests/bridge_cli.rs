@@ -282,7 +282,7 @@ fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
     let sub = Proc::spawn(
         "subscriber",
         &["match", "--subscribe", "--matcher", "idc", "--buffer", "4", "--delay-ms", "15",
-          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+          "--backpressure", mode, "--service-prefix", &p, "--out", &out.to_string_lossy()],
     );
     let publ = Proc::spawn(
         "publisher",
