@@ -130,6 +130,15 @@ impl IcpParams {
         (self.max_dist_start * self.shrink.powi(level as i32)).max(self.max_dist_end)
     }
 
+    /// Number of shrinks from the first gate to the last.
+    #[must_use]
+    pub fn last_level(&self) -> u32 {
+        if self.shrink >= 1.0 || self.max_dist_start <= self.max_dist_end {
+            return 0;
+        }
+        ((self.max_dist_end / self.max_dist_start).ln() / self.shrink.ln()).ceil() as u32
+    }
+
     /// True when the gate after `level` shrinks is at its end value.
     #[must_use]
     pub fn at_last_gate(&self, level: u32) -> bool {

@@ -187,9 +187,10 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             iterations = it + 1;
             let gate = self.icp.gate(schedule.level);
             // Lu & Milios: the window Bw shrinks as the estimate converges.
-            let window_deg = (self.params.window_start_deg
-                * self.icp.shrink.powi(schedule.level as i32))
-            .max(self.params.window_end_deg);
+            // The window narrows geometrically with the gate, reaching its end with it.
+            let progress = (schedule.level as f64 / self.icp.last_level().max(1) as f64).min(1.0);
+            let window_deg = self.params.window_start_deg
+                * (self.params.window_end_deg / self.params.window_start_deg).powf(progress);
             move_points(&pose, local, &mut self.moved);
             let query = Query {
                 local,
@@ -295,8 +296,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             }
             let settled = self.icp.small_step(&pose, &next);
             pose = next;
-            let final_stage =
-                self.icp.at_last_gate(schedule.level) && window_deg <= self.params.window_end_deg;
+            let final_stage = self.icp.at_last_gate(schedule.level);
             if schedule.advance(&self.icp, settled, final_stage) {
                 converged = true;
                 break;
