@@ -45,7 +45,9 @@ impl std::str::FromStr for Rate {
                 .and_then(|f| f.parse::<f64>().ok())
                 .filter(|f| f.is_finite() && *f > 0.0)
                 .map(Rate::Factor)
-                .ok_or_else(|| format!("bad rate {other:?}: use realtime, max or a factor like 10x")),
+                .ok_or_else(|| {
+                    format!("bad rate {other:?}: use realtime, max or a factor like 10x")
+                }),
         }
     }
 }
@@ -497,7 +499,10 @@ pub fn run_bench(args: &BridgeBenchArgs) -> Result<()> {
 
 /// Both transports, one after the other, in one run.
 pub fn bridge_bench(args: &BridgeBenchArgs) -> Result<BridgeBenchReport> {
-    anyhow::ensure!(args.beams > 0 && args.messages > 0 && args.burst > 0, "empty bench");
+    anyhow::ensure!(
+        args.beams > 0 && args.messages > 0 && args.burst > 0,
+        "empty bench"
+    );
     let ranges: Vec<f64> = (0..args.beams).map(|i| 1.0 + i as f64 * 0.01).collect();
     let iceoryx2 = TransportFigures::of(
         &iceoryx2_run(&ranges, args.messages, true)?,

@@ -149,12 +149,26 @@ fn two_processes_reproduce_the_in_process_trajectory_in_either_start_order() {
         let p = prefix(order);
         let out = dir.join(order);
         let sub_args = [
-            "match", "--subscribe", "--matcher", "q-wsm", "--service-prefix", &p, "--out",
+            "match",
+            "--subscribe",
+            "--matcher",
+            "q-wsm",
+            "--service-prefix",
+            &p,
+            "--out",
         ];
         let mut sub_args: Vec<&str> = sub_args.to_vec();
         let out_s = out.to_string_lossy().to_string();
         sub_args.push(&out_s);
-        let pub_args = ["sim", PARK, "--publish", "--max-scans", &n, "--service-prefix", &p];
+        let pub_args = [
+            "sim",
+            PARK,
+            "--publish",
+            "--max-scans",
+            &n,
+            "--service-prefix",
+            &p,
+        ];
         let (sub, publ) = if subscriber_first {
             let s = Proc::spawn("subscriber", &sub_args);
             std::thread::sleep(Duration::from_millis(300));
@@ -186,15 +200,36 @@ fn late_subscriber_gets_the_history_it_asked_for() {
     // 40 scans at 10x the park's 1 Hz: 4 s; the subscriber joins after ~1.5 s.
     let publ = Proc::spawn(
         "publisher",
-        &["sim", PARK, "--publish", "--max-scans", "40", "--rate", "10x",
-          "--wait-subscribers", "0", "--service-prefix", &p],
+        &[
+            "sim",
+            PARK,
+            "--publish",
+            "--max-scans",
+            "40",
+            "--rate",
+            "10x",
+            "--wait-subscribers",
+            "0",
+            "--service-prefix",
+            &p,
+        ],
     );
     std::thread::sleep(Duration::from_millis(1500));
     let out = dir.join("sub");
     let sub = Proc::spawn(
         "subscriber",
-        &["match", "--subscribe", "--matcher", "idc", "--history", "10", "--service-prefix",
-          &p, "--out", &out.to_string_lossy()],
+        &[
+            "match",
+            "--subscribe",
+            "--matcher",
+            "idc",
+            "--history",
+            "10",
+            "--service-prefix",
+            &p,
+            "--out",
+            &out.to_string_lossy(),
+        ],
     );
     let (ps, _, perr) = publ.wait(T);
     assert!(ps.success(), "publisher: {perr}");
@@ -217,13 +252,32 @@ fn killed_publisher_is_reported_and_the_subscriber_exits() {
     let out = dir.join("sub");
     let sub = Proc::spawn(
         "subscriber",
-        &["match", "--subscribe", "--matcher", "idc", "--reconnect-timeout", "1",
-          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+        &[
+            "match",
+            "--subscribe",
+            "--matcher",
+            "idc",
+            "--reconnect-timeout",
+            "1",
+            "--service-prefix",
+            &p,
+            "--out",
+            &out.to_string_lossy(),
+        ],
     );
     let mut publ = Proc::spawn(
         "publisher",
-        &["sim", PARK, "--publish", "--max-scans", "200", "--rate", "20x",
-          "--service-prefix", &p],
+        &[
+            "sim",
+            PARK,
+            "--publish",
+            "--max-scans",
+            "200",
+            "--rate",
+            "20x",
+            "--service-prefix",
+            &p,
+        ],
     );
     std::thread::sleep(Duration::from_millis(1500));
     publ.kill(); // SIGKILL: no end marker, no goodbye
@@ -237,7 +291,11 @@ fn killed_publisher_is_reported_and_the_subscriber_exits() {
     assert_eq!(bridge_u64(&s, "publishers_lost"), 1);
     let received = bridge_u64(&s, "received");
     assert!(received > 0 && received < 200, "{s}");
-    assert_eq!(s["scans"].as_u64(), Some(received), "outputs cover what was received");
+    assert_eq!(
+        s["scans"].as_u64(),
+        Some(received),
+        "outputs cover what was received"
+    );
 }
 
 #[test]
@@ -247,20 +305,47 @@ fn restarted_publisher_is_picked_up() {
     let out = dir.join("sub");
     let sub = Proc::spawn(
         "subscriber",
-        &["match", "--subscribe", "--matcher", "idc", "--reconnect-timeout", "20",
-          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+        &[
+            "match",
+            "--subscribe",
+            "--matcher",
+            "idc",
+            "--reconnect-timeout",
+            "20",
+            "--service-prefix",
+            &p,
+            "--out",
+            &out.to_string_lossy(),
+        ],
     );
     let mut first = Proc::spawn(
         "publisher 1",
-        &["sim", PARK, "--publish", "--max-scans", "200", "--rate", "20x",
-          "--service-prefix", &p],
+        &[
+            "sim",
+            PARK,
+            "--publish",
+            "--max-scans",
+            "200",
+            "--rate",
+            "20x",
+            "--service-prefix",
+            &p,
+        ],
     );
     std::thread::sleep(Duration::from_millis(1200));
     first.kill();
     std::thread::sleep(Duration::from_millis(500));
     let second = Proc::spawn(
         "publisher 2",
-        &["sim", PARK, "--publish", "--max-scans", "25", "--service-prefix", &p],
+        &[
+            "sim",
+            PARK,
+            "--publish",
+            "--max-scans",
+            "25",
+            "--service-prefix",
+            &p,
+        ],
     );
     let (ps, _, perr) = second.wait(T);
     assert!(ps.success(), "second publisher: {perr}");
@@ -281,13 +366,40 @@ fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
     let out = dir.join("sub");
     let sub = Proc::spawn(
         "subscriber",
-        &["match", "--subscribe", "--matcher", "idc", "--buffer", "4", "--delay-ms", "15",
-          "--backpressure", mode, "--service-prefix", &p, "--out", &out.to_string_lossy()],
+        &[
+            "match",
+            "--subscribe",
+            "--matcher",
+            "idc",
+            "--buffer",
+            "4",
+            "--delay-ms",
+            "15",
+            "--backpressure",
+            mode,
+            "--service-prefix",
+            &p,
+            "--out",
+            &out.to_string_lossy(),
+        ],
     );
     let publ = Proc::spawn(
         "publisher",
-        &["sim", PARK, "--publish", "--max-scans", "80", "--rate", "max", "--backpressure",
-          mode, "--wait-subscribers", "1", "--service-prefix", &p],
+        &[
+            "sim",
+            PARK,
+            "--publish",
+            "--max-scans",
+            "80",
+            "--rate",
+            "max",
+            "--backpressure",
+            mode,
+            "--wait-subscribers",
+            "1",
+            "--service-prefix",
+            &p,
+        ],
     );
     let (ps, pout, perr) = publ.wait(T);
     assert!(ps.success(), "publisher: {perr}");
@@ -316,7 +428,11 @@ fn slow_subscriber_in_drop_oldest_mode_counts_what_it_lost() {
     let received = bridge_u64(&s, "received");
     let missing = bridge_u64(&s, "missing");
     assert!(missing > 0 && bridge_u64(&s, "gap_events") > 0, "{s}");
-    assert_eq!(received + missing, 80, "every scan received or counted lost: {s}");
+    assert_eq!(
+        received + missing,
+        80,
+        "every scan received or counted lost: {s}"
+    );
     assert_eq!(bridge_u64(&s, "announced"), 80);
 }
 
@@ -327,11 +443,88 @@ fn subscriber_without_publisher_times_out() {
     let out = dir.join("sub");
     let sub = Proc::spawn(
         "subscriber",
-        &["match", "--subscribe", "--matcher", "idc", "--connect-timeout", "1",
-          "--service-prefix", &p, "--out", &out.to_string_lossy()],
+        &[
+            "match",
+            "--subscribe",
+            "--matcher",
+            "idc",
+            "--connect-timeout",
+            "1",
+            "--service-prefix",
+            &p,
+            "--out",
+            &out.to_string_lossy(),
+        ],
     );
     let (ss, _, serr) = sub.wait(Duration::from_secs(20));
     assert!(!ss.success());
     assert!(serr.contains("no_publisher"), "{serr}");
     assert_eq!(summary(&out)["bridge"]["end"], "no_publisher");
+}
+
+/// Wall time of the whole park drive, in one process against two (publisher + matcher).
+/// A measurement, not a check: run with
+/// `cargo test --release --test bridge_cli park_wall_time -- --ignored --nocapture`.
+#[test]
+#[ignore = "measurement; prints the wall times of the full park drive"]
+fn park_wall_time() {
+    let dir = tempdir("park-wall");
+    let (mut inproc, mut twoproc) = (Vec::new(), Vec::new());
+    for _ in 0..7 {
+        let t0 = Instant::now();
+        let cfg = qicp_sim::SimConfig::load(Path::new(PARK)).expect("park config");
+        let (records, _, _) = qicp_sim::Simulation::run(cfg).expect("simulate");
+        let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
+        config.validate().expect("config");
+        config.fill_defaults();
+        let mut matching = Matching::new(&config).expect("matcher");
+        for r in &records {
+            matching.push(r);
+        }
+        write_run(&dir.join("inproc"), &matching.finish(), &config).expect("write");
+        let in_process = t0.elapsed();
+
+        let p = prefix("park-wall");
+        let out = dir.join("two");
+        let t0 = Instant::now();
+        let sub = Proc::spawn(
+            "subscriber",
+            &[
+                "match",
+                "--subscribe",
+                "--matcher",
+                "q-wsm",
+                "--service-prefix",
+                &p,
+                "--out",
+                &out.to_string_lossy(),
+            ],
+        );
+        let publ = Proc::spawn(
+            "publisher",
+            &["sim", PARK, "--publish", "--service-prefix", &p],
+        );
+        let (ps, _, perr) = publ.wait(T);
+        assert!(ps.success(), "{perr}");
+        let (ss, _, serr) = sub.wait(T);
+        assert!(ss.success(), "{serr}");
+        let two = t0.elapsed();
+        assert_same_run(&dir.join("inproc"), &out);
+        println!(
+            "park, {} scans, q-wsm: in-process {:.3} s, two processes {:.3} s",
+            records.len(),
+            in_process.as_secs_f64(),
+            two.as_secs_f64(),
+        );
+        inproc.push(in_process.as_secs_f64());
+        twoproc.push(two.as_secs_f64());
+    }
+    let (a, b) = (
+        qicp::matching::quantile(&inproc, 0.5),
+        qicp::matching::quantile(&twoproc, 0.5),
+    );
+    println!(
+        "medians: in-process {a:.3} s, two processes {b:.3} s ({:+.1} %)",
+        (b / a - 1.0) * 100.0
+    );
 }

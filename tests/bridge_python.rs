@@ -86,17 +86,37 @@ fn python_subscriber_reads_scans_and_poses() {
     let out = std::env::temp_dir().join(format!("{prefix}-match"));
     let _ = std::fs::remove_dir_all(&out);
     let script = Path::new(ROOT).join("bridge/examples/subscriber.py");
-    let py = spawn(&python, &[&script.to_string_lossy(), &prefix, "--timeout", "30"]);
+    let py = spawn(
+        &python,
+        &[&script.to_string_lossy(), &prefix, "--timeout", "30"],
+    );
     let matcher = spawn(
         Path::new(QICP),
-        &["match", "--subscribe", "--matcher", "q-idc", "--service-prefix", &prefix, "--out",
-          &out.to_string_lossy()],
+        &[
+            "match",
+            "--subscribe",
+            "--matcher",
+            "q-idc",
+            "--service-prefix",
+            &prefix,
+            "--out",
+            &out.to_string_lossy(),
+        ],
     );
     let park = Path::new(ROOT).join("configs/worlds/park.toml");
     let publisher = spawn(
         Path::new(QICP),
-        &["sim", &park.to_string_lossy(), "--publish", "--max-scans", "30",
-          "--wait-subscribers", "2", "--service-prefix", &prefix],
+        &[
+            "sim",
+            &park.to_string_lossy(),
+            "--publish",
+            "--max-scans",
+            "30",
+            "--wait-subscribers",
+            "2",
+            "--service-prefix",
+            &prefix,
+        ],
     );
     let t = Duration::from_secs(90);
     let (ok, _, err) = publisher.output(t, "publisher");
@@ -112,7 +132,11 @@ fn python_subscriber_reads_scans_and_poses() {
     assert_eq!(s["poses"], 30, "{s}");
     assert_eq!(s["scan_missing"], 0);
     assert_eq!(s["pose_missing"], 0);
-    assert!(s["range_sum"].as_f64().is_some_and(|v| v > 0.0 && v.is_finite()));
+    assert!(
+        s["range_sum"]
+            .as_f64()
+            .is_some_and(|v| v > 0.0 && v.is_finite())
+    );
 
     // The last pose Python read is the matcher's last trajectory line.
     let tum = std::fs::read_to_string(out.join("trajectory.tum")).expect("trajectory");
@@ -126,5 +150,8 @@ fn python_subscriber_reads_scans_and_poses() {
     let pose = &s["last_pose"];
     assert_eq!(pose["scan_seq"], 29);
     let close = |a: f64, b: &serde_json::Value| (a - b.as_f64().expect("number")).abs() < 1e-9;
-    assert!(close(last[1], &pose["x"]) && close(last[2], &pose["y"]), "{pose} vs {last:?}");
+    assert!(
+        close(last[1], &pose["x"]) && close(last[2], &pose["y"]),
+        "{pose} vs {last:?}"
+    );
 }

@@ -511,7 +511,9 @@ impl ScanPublisher {
     pub fn publish(&mut self, record: &Record) -> Result<u64, PublishError> {
         let header = ScanHeader::of(record, self.core.sent);
         let ranges = record.scan.ranges();
-        self.send(header, ranges.len(), |sample| sample.write_from_slice(ranges))
+        self.send(header, ranges.len(), |sample| {
+            sample.write_from_slice(ranges)
+        })
     }
 
     /// Publishes a scan whose `beams` ranges `range(i)` computes straight into the loaned
@@ -596,17 +598,19 @@ impl ScanPublisher {
     /// have said they are ready to take samples. Returns false on timeout or SIGINT/SIGTERM.
     pub fn wait_for_subscribers(&self, n: usize, timeout: Duration) -> Result<bool, ReceiveError> {
         let port = self.port();
-        self.core.wait_until(timeout, &|| self.subscribers(), &|k, ready| {
-            // Connect to them now so that they get their history without waiting for a send.
-            let _ = port.update_connections();
-            k >= n && ready >= n as u64
-        })
+        self.core
+            .wait_until(timeout, &|| self.subscribers(), &|k, ready| {
+                // Connect to them now so that they get their history without waiting for a send.
+                let _ = port.update_connections();
+                k >= n && ready >= n as u64
+            })
     }
 
     /// After the end-of-stream marker: waits (with `timeout`) until every subscriber has
     /// left, so none loses what is still in its buffer when this process exits.
     pub fn linger(&self, timeout: Duration) -> Result<bool, ReceiveError> {
-        self.core.wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
+        self.core
+            .wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
     }
 
     /// Whether SIGINT or SIGTERM arrived (iceoryx2 catches them to exit cleanly).
@@ -616,11 +620,8 @@ impl ScanPublisher {
     }
 }
 
-type UninitScan = iceoryx2::sample_mut_uninit::SampleMutUninit<
-    Ipc,
-    [std::mem::MaybeUninit<f64>],
-    ScanHeader,
->;
+type UninitScan =
+    iceoryx2::sample_mut_uninit::SampleMutUninit<Ipc, [std::mem::MaybeUninit<f64>], ScanHeader>;
 type ScanSample = iceoryx2::sample_mut::SampleMut<Ipc, [f64], ScanHeader>;
 
 impl Drop for ScanPublisher {
@@ -719,7 +720,8 @@ impl PosePublisher {
 
     /// Waits until every pose subscriber has left (or `timeout`).
     pub fn linger(&self, timeout: Duration) -> Result<bool, ReceiveError> {
-        self.core.wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
+        self.core
+            .wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
     }
 }
 
@@ -1147,15 +1149,17 @@ where
             Err(Attempt::Open(e)) => return Err(fail(detail(e))),
         }
     }
-    Err(fail(detail(PublishSubscribeOpenOrCreateError::SystemInFlux)))
+    Err(fail(detail(
+        PublishSubscribeOpenOrCreateError::SystemInFlux,
+    )))
 }
 
 trait HasOverflow {
     fn safe_overflow(&self) -> bool;
 }
 
-impl<P: std::fmt::Debug + IceoryxSend + ?Sized, H: std::fmt::Debug + ZeroCopySend>
-    HasOverflow for publish_subscribe::PortFactory<Ipc, P, H>
+impl<P: std::fmt::Debug + IceoryxSend + ?Sized, H: std::fmt::Debug + ZeroCopySend> HasOverflow
+    for publish_subscribe::PortFactory<Ipc, P, H>
 {
     fn safe_overflow(&self) -> bool {
         self.static_config().has_safe_overflow()

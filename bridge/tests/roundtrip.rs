@@ -15,11 +15,13 @@ fn topics(test: &str) -> Topics {
 
 fn record(i: usize) -> Record {
     let geometry = BeamGeometry::centered(181, std::f64::consts::PI, 20.0);
-    let ranges = (0..181).map(|b| 1.0 + (i * 181 + b) as f64 * 1e-3).collect();
+    let ranges = (0..181)
+        .map(|b| 1.0 + (i * 181 + b) as f64 * 1e-3)
+        .collect();
     Record {
         scan: Scan::new(i as f64 * 0.1, geometry, ranges).expect("scan"),
         odometry: Pose2::new(i as f64, 0.5, 0.01 * i as f64),
-        truth: (i % 2 == 0).then(|| Pose2::new(i as f64, 0.0, 0.0)),
+        truth: i.is_multiple_of(2).then(|| Pose2::new(i as f64, 0.0, 0.0)),
         laser_offset: Pose2::IDENTITY,
     }
 }
@@ -51,12 +53,18 @@ fn scans_arrive_intact_and_in_order() {
     let t = topics.clone();
     let publisher = std::thread::spawn(move || {
         let mut p = ScanPublisher::create(&t, &PublisherOptions::default()).expect("publisher");
-        assert!(p.wait_for_subscribers(1, Duration::from_secs(10)).expect("wait"));
+        assert!(
+            p.wait_for_subscribers(1, Duration::from_secs(10))
+                .expect("wait")
+        );
         for r in &sent {
             p.publish(r).expect("publish");
         }
         p.end_of_stream().expect("end");
-        assert!(p.blocked_sends() > 0, "a buffer of 8 must have blocked 50 sends");
+        assert!(
+            p.blocked_sends() > 0,
+            "a buffer of 8 must have blocked 50 sends"
+        );
         p.linger(Duration::from_secs(10)).expect("linger")
     });
     let mut got = Vec::new();
@@ -69,7 +77,10 @@ fn scans_arrive_intact_and_in_order() {
         })
         .expect("run");
     drop(subscriber);
-    assert!(publisher.join().expect("publisher thread"), "publisher lingered to timeout");
+    assert!(
+        publisher.join().expect("publisher thread"),
+        "publisher lingered to timeout"
+    );
     assert_eq!(report.end, Some(StreamEnd::EndOfStream));
     assert!(report.is_complete(), "{report:?}");
     assert_eq!(report.received, 50);
@@ -120,7 +131,10 @@ fn poses_round_trip() {
     assert_eq!(got.len(), 10);
     assert_eq!(got[3].scan_seq, 3);
     assert_eq!(got[3].pose.x, 3.0);
-    assert_eq!(got[3].fallback, qicp_bridge::messages::fallback_code::EMPTY_REFERENCE);
+    assert_eq!(
+        got[3].fallback,
+        qicp_bridge::messages::fallback_code::EMPTY_REFERENCE
+    );
 }
 
 #[test]
