@@ -191,6 +191,8 @@ impl MatcherConfig {
 
     /// Fills every section the kind uses with defaults where absent: the effective config.
     pub fn fill_defaults(&mut self) {
+        let resolution = if self.kind.is_idc() { 0.02 } else { 0.0 };
+        self.relevance.map_resolution.get_or_insert(resolution);
         if self.kind.is_idc() {
             self.idc.get_or_insert_with(IdcParams::default);
         } else {
