@@ -441,6 +441,21 @@ pub struct BridgeBenchArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// How both readers wait: `event` (block in the kernel until woken: the WaitSet for
+    /// iceoryx2, `read` for the socket; what qicp's subscribers do) or `spin` (poll without
+    /// sleeping: the transport's own cost, without the wake-up).
+    #[arg(long, value_enum, default_value_t = WaitStrategy::Event)]
+    pub wait: WaitStrategy,
+}
+
+/// How the bench's readers wait for a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WaitStrategy {
+    /// Block until woken by the kernel.
+    Event,
+    /// Busy-poll.
+    Spin,
 }
 
 /// One transport's figures.
@@ -471,6 +486,8 @@ pub struct BridgeBenchReport {
     pub burst: usize,
     /// `iceoryx2.p50_us / uds.p50_us`.
     pub p50_ratio: f64,
+    /// How both readers waited.
+    pub wait: WaitStrategy,
 }
 
 /// Runs `qicp bench bridge`.
@@ -490,8 +507,8 @@ pub fn run_bench(args: &BridgeBenchArgs) -> Result<()> {
             );
         }
         println!(
-            "{} beams, {} bytes per message; p50 ratio iceoryx2/uds = {:.2}",
-            report.beams, report.bytes, report.p50_ratio
+            "{} beams, {} bytes per message, readers {:?}; p50 ratio iceoryx2/uds = {:.2}",
+            report.beams, report.bytes, report.wait, report.p50_ratio
         );
     }
     Ok(())
@@ -504,13 +521,14 @@ pub fn bridge_bench(args: &BridgeBenchArgs) -> Result<BridgeBenchReport> {
         "empty bench"
     );
     let ranges: Vec<f64> = (0..args.beams).map(|i| 1.0 + i as f64 * 0.01).collect();
+    let spin = args.wait == WaitStrategy::Spin;
     let iceoryx2 = TransportFigures::of(
-        &iceoryx2_run(&ranges, args.messages, true)?,
-        iceoryx2_run(&ranges, args.burst, false)?,
+        &iceoryx2_run(&ranges, args.messages, true, spin)?,
+        iceoryx2_run(&ranges, args.burst, false, spin)?,
     );
     let uds = TransportFigures::of(
-        &uds_run(&ranges, args.messages, true)?,
-        uds_run(&ranges, args.burst, false)?,
+        &uds_run(&ranges, args.messages, true, spin)?,
+        uds_run(&ranges, args.burst, false, spin)?,
     );
     Ok(BridgeBenchReport {
         iceoryx2,
@@ -520,6 +538,7 @@ pub fn bridge_bench(args: &BridgeBenchArgs) -> Result<BridgeBenchReport> {
         messages: args.messages,
         burst: args.burst,
         p50_ratio: iceoryx2.p50_us / uds.p50_us,
+        wait: args.wait,
     })
 }
 
@@ -548,7 +567,7 @@ fn stamp(epoch: Instant) -> f64 {
 /// iceoryx2: publisher thread → this thread's `ScanSubscriber`. With `paced`, each message
 /// is sent after the previous one arrived (latency: every message pays a wake-up); without,
 /// back to back (throughput).
-fn iceoryx2_run(ranges: &[f64], messages: usize, paced: bool) -> Result<RunTimes> {
+fn iceoryx2_run(ranges: &[f64], messages: usize, paced: bool, spin: bool) -> Result<RunTimes> {
     let topics = Topics::new(&format!(
         "qicp-bench-{}-{}",
         std::process::id(),
@@ -607,18 +626,36 @@ fn iceoryx2_run(ranges: &[f64], messages: usize, paced: bool) -> Result<RunTimes
     let mut latencies_us = Vec::with_capacity(messages);
     let mut checksum = 0.0;
     let mut last_receive = 0.0;
-    let report = subscriber.run(|event| {
-        if let StreamEvent::Data(view) = event {
-            last_receive = stamp(epoch);
-            latencies_us.push((last_receive - view.header.timestamp) * 1e6);
-            // Touch every range, as the socket reader must.
-            checksum += view.ranges.iter().sum::<f64>();
-            if paced {
-                let _ = ack_tx.try_send(());
-            }
+    let mut on_scan = |view: qicp_bridge::ScanView<'_>| {
+        last_receive = stamp(epoch);
+        latencies_us.push((last_receive - view.header.timestamp) * 1e6);
+        // Touch every range, as the socket reader must.
+        checksum += view.ranges.iter().sum::<f64>();
+        if paced {
+            let _ = ack_tx.try_send(());
         }
-        ControlFlow::Continue(())
-    })?;
+    };
+    let report = if spin {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut received = 0;
+        while received < messages {
+            received += subscriber.poll(&mut on_scan)?;
+            anyhow::ensure!(Instant::now() < deadline, "spinning bench stalled");
+            std::hint::spin_loop();
+        }
+        StreamReport {
+            received: received as u64,
+            end: Some(StreamEnd::EndOfStream),
+            ..StreamReport::default()
+        }
+    } else {
+        subscriber.run(|event| {
+            if let StreamEvent::Data(view) = event {
+                on_scan(view);
+            }
+            ControlFlow::Continue(())
+        })?
+    };
     drop(subscriber);
     let first_send = publisher
         .join()
@@ -637,12 +674,13 @@ fn iceoryx2_run(ranges: &[f64], messages: usize, paced: bool) -> Result<RunTimes
 
 /// The socket baseline: the same header and ranges, serialised into one frame per message,
 /// written to a Unix-domain stream socket and read back by a thread blocked in `read`.
-fn uds_run(ranges: &[f64], messages: usize, paced: bool) -> Result<RunTimes> {
+fn uds_run(ranges: &[f64], messages: usize, paced: bool, spin: bool) -> Result<RunTimes> {
     use std::io::{Read, Write};
     let header_bytes = std::mem::size_of::<ScanHeader>();
     let frame = header_bytes + 8 * ranges.len();
     let (mut writer, mut reader) = std::os::unix::net::UnixStream::pair()?;
     reader.set_read_timeout(Some(Duration::from_secs(10)))?;
+    reader.set_nonblocking(spin)?;
     let epoch = Instant::now();
     let (ack_tx, ack_rx) = std::sync::mpsc::sync_channel::<()>(1);
     let owned = ranges.to_vec();
@@ -671,8 +709,25 @@ fn uds_run(ranges: &[f64], messages: usize, paced: bool) -> Result<RunTimes> {
     let mut latencies_us = Vec::with_capacity(messages);
     let mut checksum = 0.0;
     let mut last_receive = 0.0;
+    let deadline = Instant::now() + Duration::from_secs(60);
     for _ in 0..messages {
-        reader.read_exact(&mut buf)?;
+        if spin {
+            // Non-blocking reads until the frame is complete.
+            let mut filled = 0;
+            while filled < frame {
+                match reader.read(&mut buf[filled..]) {
+                    Ok(0) => bail!("socket closed"),
+                    Ok(n) => filled += n,
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                        anyhow::ensure!(Instant::now() < deadline, "spinning socket stalled");
+                        std::hint::spin_loop();
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+            }
+        } else {
+            reader.read_exact(&mut buf)?;
+        }
         last_receive = stamp(epoch);
         let sent = f64::from_le_bytes(buf[16..24].try_into()?);
         latencies_us.push((last_receive - sent) * 1e6);

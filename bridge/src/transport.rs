@@ -913,6 +913,7 @@ fn subscriber_limits(
 #[derive(Debug)]
 pub struct ScanSubscriber {
     subscriber: Option<Subscriber<Ipc, [f64], ScanHeader>>,
+    polled_publishers: std::cell::Cell<usize>,
     service: publish_subscribe::PortFactory<Ipc, [f64], ScanHeader>,
     signals: Signals,
     node: Node<Ipc>,
@@ -949,6 +950,7 @@ impl ScanSubscriber {
         let _ = signals.notify(event_id::SUBSCRIBER_CONNECTED);
         Ok(Self {
             subscriber: Some(subscriber),
+            polled_publishers: std::cell::Cell::new(usize::MAX),
             service,
             signals,
             node,
@@ -1002,6 +1004,42 @@ impl ScanSubscriber {
                 })
             },
         )
+    }
+}
+
+impl ScanSubscriber {
+    /// Takes every scan waiting in the buffer without blocking, for a caller that runs its
+    /// own cycle (a control loop, a busy-polling benchmark). No sequence bookkeeping: use
+    /// [`ScanSubscriber::run`] for that. Returns the number of scans handed to `on_scan`.
+    pub fn poll(&self, mut on_scan: impl FnMut(ScanView<'_>)) -> Result<usize, ReceiveError> {
+        let port = self
+            .subscriber
+            .as_ref()
+            .unwrap_or_else(|| unreachable!("the subscriber is taken only on drop"));
+        let error = |detail| ReceiveError::Receive {
+            service: self.name.clone(),
+            detail,
+        };
+        let count = self.service.dynamic_config().number_of_publishers();
+        if count != self.polled_publishers.get() {
+            port.update_connections().map_err(|e| error(detail(e)))?;
+            if count > 0 {
+                let _ = self.signals.notify(event_id::SUBSCRIBER_READY);
+            }
+            self.polled_publishers.set(count);
+        }
+        let mut n = 0;
+        while let Some(sample) = port.receive().map_err(|e| error(detail(e)))? {
+            if sample.user_header().kind == KIND_END_OF_STREAM {
+                continue;
+            }
+            on_scan(ScanView {
+                header: sample.user_header(),
+                ranges: sample.payload(),
+            });
+            n += 1;
+        }
+        Ok(n)
     }
 }
 
