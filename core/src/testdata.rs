@@ -75,6 +75,7 @@ pub fn laser_scans(n: usize, seed: u64) -> Vec<Point2<f64>> {
     let posts: Vec<(f64, f64, f64)> = (0..12)
         .map(|_| (r.range(-18.0, 18.0), r.range(-5.0, 5.0), r.range(0.1, 0.4)))
         .collect();
+    let world = SyntheticWorld { walls, posts };
     let mut out = Vec::with_capacity(n);
     while out.len() < n {
         let (ox, oy, heading) = (r.range(-17.0, 17.0), r.range(-5.5, 5.5), r.range(-3.2, 3.2));
@@ -84,31 +85,7 @@ pub fn laser_scans(n: usize, seed: u64) -> Vec<Point2<f64>> {
             }
             let a = heading - std::f64::consts::FRAC_PI_2 + b as f64 * std::f64::consts::PI / 180.0;
             let (dx, dy) = (a.cos(), a.sin());
-            let mut best = 30.0f64;
-            for w in &walls {
-                let (ex, ey) = (w[2] - w[0], w[3] - w[1]);
-                let den = dx * ey - dy * ex;
-                if den.abs() < 1e-12 {
-                    continue;
-                }
-                let t = ((w[0] - ox) * ey - (w[1] - oy) * ex) / den;
-                let u = ((w[0] - ox) * dy - (w[1] - oy) * dx) / den;
-                if t > 0.0 && (0.0..=1.0).contains(&u) {
-                    best = best.min(t);
-                }
-            }
-            for &(px, py, pr) in &posts {
-                let (fx, fy) = (ox - px, oy - py);
-                let bq = fx * dx + fy * dy;
-                let c = fx * fx + fy * fy - pr * pr;
-                let disc = bq * bq - c;
-                if disc >= 0.0 {
-                    let t = -bq - disc.sqrt();
-                    if t > 0.0 {
-                        best = best.min(t);
-                    }
-                }
-            }
+            let best = world.cast(ox, oy, dx, dy, 30.0);
             if best < 30.0 {
                 let range = best + 0.01 * r.normal();
                 out.push(Point2::new(ox + range * dx, oy + range * dy));

@@ -130,6 +130,23 @@ impl IcpParams {
         (self.max_dist_start * self.shrink.powi(level as i32)).max(self.max_dist_end)
     }
 
+    /// Why matching `scan` against `reference` cannot even start, if it cannot.
+    #[must_use]
+    pub fn cannot_match<I: SpatialIndex>(
+        &self,
+        scan: &qicp_core::Scan,
+        reference: &Reference<I>,
+    ) -> Option<qicp_core::Fallback> {
+        let valid = scan.valid_count();
+        if valid < self.min_correspondences {
+            Some(qicp_core::Fallback::TooFewPoints { valid })
+        } else if reference.is_empty() {
+            Some(qicp_core::Fallback::EmptyReference)
+        } else {
+            None
+        }
+    }
+
     /// Number of shrinks from the first gate to the last.
     #[must_use]
     pub fn last_level(&self) -> u32 {

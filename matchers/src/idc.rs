@@ -171,13 +171,10 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         guess: Pose2,
         prior: Option<Matrix3<f64>>,
     ) -> MatchResult {
+        if let Some(why) = self.icp.cannot_match(scan, reference) {
+            return MatchResult::fallback(guess, why);
+        }
         let local = scan.points();
-        if local.len() < self.icp.min_correspondences {
-            return MatchResult::fallback(guess, Fallback::TooFewPoints { valid: local.len() });
-        }
-        if reference.is_empty() {
-            return MatchResult::fallback(guess, Fallback::EmptyReference);
-        }
         self.closest.begin_scan(local);
         let mut pose = guess;
         let mut converged = false;
