@@ -1,0 +1,172 @@
+//! End to end: `qicp match` on a short simulated corridor drive writes the trajectory, the
+//! per-scan CSV, a summary with every key and the effective config, and scores relations; a
+//! malformed log is refused with its line number, or skipped and counted with --lenient.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn qicp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(args)
+        .output()
+        .expect("runs qicp")
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("qicp-match-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn text(p: &Path) -> String {
+    std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// A short corridor drive as a CARMEN log with ground truth.
+fn corridor_log() -> PathBuf {
+    let dir = temp("sim");
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/worlds/corridor.toml");
+    let o = qicp(&[
+        "sim",
+        config,
+        "--out",
+        dir.to_str().unwrap(),
+        "--max-scans",
+        "60",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    dir
+}
+
+#[test]
+fn match_writes_every_output() {
+    let sim = corridor_log();
+    let out = temp("out");
+    let log = sim.join("sim.log");
+    let o = qicp(&[
+        "match",
+        log.to_str().unwrap(),
+        "--matcher",
+        "q-wsm",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    for key in [
+        "matcher",
+        "scans",
+        "ms_per_scan_median",
+        "ms_per_scan_p99",
+        "map_points",
+        "residual_mean_mm",
+        "certainty_mean",
+        "fallbacks",
+    ] {
+        assert!(summary.get(key).is_some(), "summary lacks {key}: {summary}");
+    }
+    assert_eq!(summary["matcher"], "q-wsm");
+    assert_eq!(summary["scans"], 60);
+    assert_eq!(
+        summary["fallbacks"], 1,
+        "only the first scan has nothing to match"
+    );
+    let on_disk: serde_json::Value =
+        serde_json::from_str(&text(&out.join("summary.json"))).expect("summary.json");
+    assert_eq!(on_disk, summary);
+    // One pose per laser record, TUM format.
+    let traj = text(&out.join("trajectory.tum"));
+    let poses: Vec<&str> = traj.lines().filter(|l| !l.starts_with('#')).collect();
+    assert_eq!(poses.len(), 60);
+    assert!(poses.iter().all(|l| l.split_whitespace().count() == 8));
+    let csv = text(&out.join("matches.csv"));
+    assert!(csv.starts_with("timestamp,iterations,correspondences,residual_mm,certainty,ms"));
+    assert_eq!(csv.lines().count(), 61);
+    // The effective config is complete and loads again.
+    let config = text(&out.join("config.toml"));
+    assert!(config.contains("[matcher.wsm]") && config.contains("[matcher.relevance]"));
+    let again = qicp(&[
+        "match",
+        log.to_str().unwrap(),
+        "--config",
+        out.join("config.toml").to_str().unwrap(),
+        "--out",
+        temp("again").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(
+        again.status.success(),
+        "{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+    let twice: serde_json::Value = serde_json::from_slice(&again.stdout).expect("JSON");
+    assert_eq!(
+        twice["residual_mean_mm"], summary["residual_mean_mm"],
+        "same config, same run"
+    );
+}
+
+#[test]
+fn malformed_lines_name_the_line_or_are_counted() {
+    let sim = corridor_log();
+    let log = text(&sim.join("sim.log"));
+    let mut lines: Vec<&str> = log.lines().collect();
+    let at = lines
+        .iter()
+        .position(|l| l.starts_with("FLASER"))
+        .expect("a FLASER line")
+        + 3;
+    lines.insert(at, "FLASER 181 1.0 2.0 oops");
+    let bad = temp("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    let path = bad.join("bad.log");
+    std::fs::write(&path, lines.join("\n")).unwrap();
+    let out = temp("bad-out");
+    let o = qicp(&[
+        "match",
+        path.to_str().unwrap(),
+        "--matcher",
+        "wsm",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&format!("bad.log:{}", at + 1)),
+        "error names file and line: {err}"
+    );
+    let o = qicp(&[
+        "match",
+        path.to_str().unwrap(),
+        "--matcher",
+        "wsm",
+        "--out",
+        out.to_str().unwrap(),
+        "--lenient",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["skipped_lines"], 1);
+    assert_eq!(summary["scans"], 60);
+}
+
+#[test]
+fn bad_matcher_choices_are_refused() {
+    let out = temp("refused");
+    let o = qicp(&[
+        "match",
+        "nonexistent.log",
+        "--matcher",
+        "q-icp",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("q-icp"));
+    let o = qicp(&["match", "nonexistent.log", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--matcher"));
+}
