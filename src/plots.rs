@@ -339,28 +339,13 @@ pub fn occupancy_map(
         });
     }
     if let Some(truth) = truth {
-        tri!(
-            out,
-            chart.draw_series(LineSeries::new(
-                truth.iter().map(|p| (p.x, p.y)),
-                TRUTH_COLOR.mix(0.45).stroke_width(5),
-            ))
-        )
-        .label("true path")
-        .legend(|(x, y)| {
-            PathElement::new([(x, y), (x + 24, y)], TRUTH_COLOR.mix(0.45).stroke_width(5))
-        });
+        let style = RGBColor(150, 150, 150).stroke_width(5);
+        draw_path(out, &mut chart, truth, style)?;
+        legend_entry(out, &mut chart, "true path", style)?;
     }
-    let est = PALETTE[1];
-    tri!(
-        out,
-        chart.draw_series(LineSeries::new(
-            path.iter().map(|p| (p.x, p.y)),
-            est.stroke_width(2)
-        ))
-    )
-    .label("estimated path")
-    .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], est.stroke_width(2)));
+    let style = PALETTE[1].stroke_width(2);
+    draw_path(out, &mut chart, path, style)?;
+    legend_entry(out, &mut chart, "estimated path", style)?;
     if let Some(start) = path.first() {
         tri!(
             out,
@@ -446,6 +431,64 @@ fn emptiest_corner(
         .clone()
 }
 
+/// Draws a path as separate segments (round joints for thick lines), leaving out steps under
+/// a millimetre: plotters draws a zero-length thick segment, or the joint of a polyline that
+/// turns back on itself, as a line shooting far out of the path.
+fn draw_path<'a, 'b: 'a>(
+    out: &Path,
+    chart: &mut ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    poses: &[Pose2],
+    style: ShapeStyle,
+) -> Result<(), PlotError> {
+    // A zero-length thick segment has no direction: plotters draws it as a stray line.
+    let mut points: Vec<(f64, f64)> = Vec::with_capacity(poses.len());
+    for p in poses.iter().filter(|p| p.x.is_finite() && p.y.is_finite()) {
+        if points
+            .last()
+            .is_none_or(|&(x, y)| (p.x - x).hypot(p.y - y) > 1e-3)
+        {
+            points.push((p.x, p.y));
+        }
+    }
+    tri!(
+        out,
+        chart.draw_series(
+            points
+                .windows(2)
+                .map(|w| PathElement::new(vec![w[0], w[1]], style))
+        )
+    );
+    if style.stroke_width > 2 {
+        let r = style.stroke_width / 2;
+        let joint = ShapeStyle {
+            filled: true,
+            stroke_width: 0,
+            ..style
+        };
+        tri!(
+            out,
+            chart.draw_series(points.iter().map(|&p| Circle::new(p, r, joint)))
+        );
+    }
+    Ok(())
+}
+
+/// A legend line for something drawn without a label.
+fn legend_entry<'a, 'b: 'a>(
+    out: &Path,
+    chart: &mut ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    label: &str,
+    style: ShapeStyle,
+) -> Result<(), PlotError> {
+    tri!(
+        out,
+        chart.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+    )
+    .label(label)
+    .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], style));
+    Ok(())
+}
+
 // ---------------------------------------------------------------------------------------------
 // Trajectories
 
@@ -529,17 +572,20 @@ pub fn trajectories(out: &Path, title: &str, series: &[PathSeries<'_>]) -> Resul
     for s in series {
         let style = s.color.stroke_width(s.width);
         let points = s.poses.iter().map(|p| (p.x, p.y));
-        let drawn = if s.dashed {
+        if s.dashed {
             tri!(
                 out,
                 chart.draw_series(DashedLineSeries::new(points, 10, 7, style))
-            )
+            );
         } else {
-            tri!(out, chart.draw_series(LineSeries::new(points, style)))
-        };
-        drawn
-            .label(s.label.clone())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], style));
+            draw_path(out, &mut chart, s.poses, style)?;
+        }
+        tri!(
+            out,
+            chart.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+        )
+        .label(s.label.clone())
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], style));
     }
     if let Some(start) = series.first().and_then(|s| s.poses.first()) {
         tri!(
