@@ -9,7 +9,7 @@
 //!
 //! Services: `<prefix>/scan` and `<prefix>/pose` (`--service-prefix`, default `qicp`).
 
-use crate::logs::carmen::{CarmenOptions, read_carmen};
+use crate::logs::carmen::load_for_command;
 use crate::matching::{Matching, quantile, write_run};
 use anyhow::{Context, Result, bail};
 use qicp_bridge::{
@@ -204,19 +204,7 @@ pub fn run_replay(args: ReplayArgs) -> Result<()> {
     if !args.bridge.publish {
         bail!("qicp replay publishes a log: give --publish");
     }
-    let log = read_carmen(
-        &args.log,
-        &CarmenOptions {
-            lenient: args.lenient,
-            ..CarmenOptions::default()
-        },
-    )?;
-    if log.skipped_lines > 0 {
-        eprintln!(
-            "warning: skipped {} malformed lines (--lenient)",
-            log.skipped_lines
-        );
-    }
+    let log = load_for_command(&args.log, args.lenient)?;
     let beams = log.records.first().map_or(1, |r| r.scan.beams());
     let report = publish_records(log.records.into_iter().map(Ok), beams, &args.bridge)?;
     print_publish_report(&report)

@@ -1,6 +1,6 @@
 //! `qicp match LOG --matcher KIND [--config FILE] --out DIR`.
 
-use crate::logs::carmen::{CarmenOptions, read_carmen};
+use crate::logs::carmen::load_for_command;
 use crate::matching::{run_matcher, write_run};
 use anyhow::{Context, Result, bail};
 use qicp_matchers::{MatcherConfig, MatcherKind};
@@ -68,19 +68,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
     let (Some(log_path), Some(out)) = (&args.log, &args.out) else {
         bail!("give a LOG and --out DIR (or --subscribe)");
     };
-    let log = read_carmen(
-        log_path,
-        &CarmenOptions {
-            lenient: args.lenient,
-            ..CarmenOptions::default()
-        },
-    )?;
-    if log.skipped_lines > 0 {
-        eprintln!(
-            "warning: skipped {} malformed lines (--lenient)",
-            log.skipped_lines
-        );
-    }
+    let log = load_for_command(log_path, args.lenient)?;
     let run = run_matcher(&log.records, &config, true)?;
     write_run(out, &run, &config)?;
     let mut summary = serde_json::to_value(&run.summary)?;

@@ -249,6 +249,26 @@ enum Layout {
     },
 }
 
+/// Reads a CARMEN log for a command: strict, or with `lenient` skipping malformed lines and
+/// warning on stderr how many it skipped.
+pub fn load_for_command(path: &Path, lenient: bool) -> Result<CarmenLog, LogError> {
+    let log = read_carmen(
+        path,
+        &CarmenOptions {
+            lenient,
+            ..CarmenOptions::default()
+        },
+    )?;
+    if log.skipped_lines > 0 {
+        eprintln!(
+            "warning: skipped {} malformed lines of {} (--lenient)",
+            log.skipped_lines,
+            path.display()
+        );
+    }
+    Ok(log)
+}
+
 /// Reads a CARMEN log, plain or bzip2-compressed.
 pub fn read_carmen(path: &Path, opts: &CarmenOptions) -> Result<CarmenLog, LogError> {
     let mut reader = super::open_text(path)?;
