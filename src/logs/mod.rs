@@ -99,6 +99,55 @@ pub(crate) fn next_line<R: BufRead + ?Sized>(
 }
 
 /// Parses a number the way C's `strtod` writes them, accepting `nan`, `-nan` and `inf`.
+/// Reads rows of eight finite numbers, one per line, skipping blank lines and `#` comments,
+/// and hands each to `row` with its 1-based line number. `layout` names the columns in errors
+/// (e.g. `timestamp x y z qx qy qz qw`).
+pub(crate) fn read_rows8<R: BufRead + ?Sized>(
+    reader: &mut R,
+    name: &str,
+    layout: &str,
+    mut row: impl FnMut(usize, [f64; 8]) -> Result<(), LogError>,
+) -> Result<(), LogError> {
+    let mut buf = Vec::new();
+    let mut line_no = 0;
+    while next_line(reader, &mut buf).map_err(|e| LogError::Io {
+        path: name.to_string(),
+        source: e,
+    })? {
+        line_no += 1;
+        let line = std::str::from_utf8(&buf)
+            .map_err(|_| LogError::malformed(name, line_no, "not UTF-8 text"))?
+            .trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut v = [0.0; 8];
+        let mut n = 0;
+        for tok in line.split_ascii_whitespace() {
+            if n == 8 {
+                return Err(LogError::malformed(
+                    name,
+                    line_no,
+                    format!("more than 8 fields (expected `{layout}`)"),
+                ));
+            }
+            v[n] = parse_f64(tok).filter(|x| x.is_finite()).ok_or_else(|| {
+                LogError::malformed(name, line_no, format!("not a finite number: `{tok}`"))
+            })?;
+            n += 1;
+        }
+        if n != 8 {
+            return Err(LogError::malformed(
+                name,
+                line_no,
+                format!("{n} fields, expected 8 (`{layout}`)"),
+            ));
+        }
+        row(line_no, v)?;
+    }
+    Ok(())
+}
+
 pub(crate) fn parse_f64(token: &str) -> Option<f64> {
     token.parse::<f64>().ok()
 }

@@ -3,7 +3,7 @@
 //! Planar poses are written with z = 0 and the quaternion of a rotation about z by the
 //! heading θ: `qx = qy = 0`, `qz = sin(θ/2)`, `qw = cos(θ/2)`.
 
-use super::{LogError, next_line, parse_f64};
+use super::{LogError, read_rows8};
 use qicp_core::Pose2;
 use std::io::{BufRead, Write};
 use std::path::Path;
@@ -34,41 +34,7 @@ pub fn read_tum_from<R: BufRead + ?Sized>(
     name: &str,
 ) -> Result<Vec<Stamped>, LogError> {
     let mut poses = Vec::new();
-    let mut buf = Vec::new();
-    let mut line_no = 0;
-    while next_line(reader, &mut buf).map_err(|e| LogError::Io {
-        path: name.to_string(),
-        source: e,
-    })? {
-        line_no += 1;
-        let line = std::str::from_utf8(&buf)
-            .map_err(|_| LogError::malformed(name, line_no, "not UTF-8 text"))?
-            .trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let mut v = [0.0; 8];
-        let mut n = 0;
-        for tok in line.split_ascii_whitespace() {
-            if n == 8 {
-                return Err(LogError::malformed(
-                    name,
-                    line_no,
-                    "more than 8 fields (expected `timestamp x y z qx qy qz qw`)",
-                ));
-            }
-            v[n] = parse_f64(tok).filter(|x| x.is_finite()).ok_or_else(|| {
-                LogError::malformed(name, line_no, format!("not a finite number: `{tok}`"))
-            })?;
-            n += 1;
-        }
-        if n != 8 {
-            return Err(LogError::malformed(
-                name,
-                line_no,
-                format!("{n} fields, expected 8 (`timestamp x y z qx qy qz qw`)"),
-            ));
-        }
+    read_rows8(reader, name, "timestamp x y z qx qy qz qw", |line_no, v| {
         let [t, x, y, _z, qx, qy, qz, qw] = v;
         if qx * qx + qy * qy + qz * qz + qw * qw < 1e-12 {
             return Err(LogError::malformed(name, line_no, "zero quaternion"));
@@ -76,7 +42,8 @@ pub fn read_tum_from<R: BufRead + ?Sized>(
         // Yaw of the quaternion (z-y-x Euler angles); for a planar pose 2·atan2(qz, qw).
         let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
         poses.push((t, Pose2::new(x, y, yaw)));
-    }
+        Ok(())
+    })?;
     Ok(poses)
 }
 
