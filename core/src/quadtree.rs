@@ -99,6 +99,7 @@ pub struct QuadTreeN<const B: usize> {
 
 impl<const B: usize> Default for QuadTreeN<B> {
     fn default() -> Self {
+        const { assert!(B >= 2, "a quad tree bucket must hold at least two points") };
         Self {
             nodes: Vec::new(),
             root: Cell {
@@ -121,7 +122,6 @@ impl<const B: usize> QuadTreeN<B> {
     /// An empty tree.
     #[must_use]
     pub fn new() -> Self {
-        assert!(B >= 2, "a quad tree bucket must hold at least two points");
         Self::default()
     }
 
