@@ -136,3 +136,16 @@ pub enum ReceiveError {
 pub(crate) fn detail(e: impl std::fmt::Debug) -> String {
     format!("{e:?}")
 }
+
+/// The error of a port (`"publisher"` or `"subscriber"`) that could not be created on `service`.
+pub(crate) fn port_error(
+    port: &'static str,
+    service: &str,
+    e: impl std::fmt::Debug,
+) -> ConnectError {
+    ConnectError::Port {
+        port,
+        service: service.to_string(),
+        detail: detail(e),
+    }
+}

@@ -5,7 +5,7 @@
 //! connected or left). Subscribers block in a [`WaitSet`] on their event listener; between
 //! events they wake only on a `tick` to notice a publisher that died without saying so.
 
-use crate::error::{ConnectError, PublishError, ReceiveError, detail};
+use crate::error::{ConnectError, PublishError, ReceiveError, detail, port_error};
 use crate::messages::{KIND_END_OF_STREAM, LAYOUT_VERSION, PoseMessage, ScanHeader};
 use crate::sequence::{Observation, SequenceTracker, StreamEnd, StreamReport};
 use iceoryx2::port::listener::Listener;
@@ -348,6 +348,17 @@ struct PublisherCore {
 }
 
 impl PublisherCore {
+    /// A publisher's shared state, before anything has been sent.
+    fn new(service: String, signals: Signals, node: Node<Ipc>) -> Self {
+        Self {
+            service,
+            signals,
+            node,
+            sent: 0,
+            ready: std::cell::Cell::new(0),
+        }
+    }
+
     fn interrupted(&self) -> bool {
         self.node.wait(Duration::ZERO).is_err()
     }
@@ -476,22 +487,12 @@ impl ScanPublisher {
                 }
             })
             .create()
-            .map_err(|e| ConnectError::Port {
-                port: "publisher",
-                service: name.clone(),
-                detail: detail(e),
-            })?;
+            .map_err(|e| port_error("publisher", &name, e))?;
         let _ = signals.notify(event_id::PUBLISHER_CONNECTED);
         Ok(Self {
             publisher: Some(publisher),
             service,
-            core: PublisherCore {
-                service: name,
-                signals,
-                node,
-                sent: 0,
-                ready: std::cell::Cell::new(0),
-            },
+            core: PublisherCore::new(name, signals, node),
             backpressure: options.backpressure,
             blocked,
         })
@@ -653,22 +654,12 @@ impl PosePublisher {
         let publisher = service
             .publisher_builder()
             .create()
-            .map_err(|e| ConnectError::Port {
-                port: "publisher",
-                service: name.clone(),
-                detail: detail(e),
-            })?;
+            .map_err(|e| port_error("publisher", &name, e))?;
         let _ = signals.notify(event_id::PUBLISHER_CONNECTED);
         Ok(Self {
             publisher: Some(publisher),
             service,
-            core: PublisherCore {
-                service: name,
-                signals,
-                node,
-                sent: 0,
-                ready: std::cell::Cell::new(0),
-            },
+            core: PublisherCore::new(name, signals, node),
         })
     }
 
@@ -941,11 +932,7 @@ impl ScanSubscriber {
             .buffer_size(buffer)
             .history_request(history)
             .create()
-            .map_err(|e| ConnectError::Port {
-                port: "subscriber",
-                service: name.clone(),
-                detail: detail(e),
-            })?;
+            .map_err(|e| port_error("subscriber", &name, e))?;
         let signals = Signals::open(&node, &name)?;
         let _ = signals.notify(event_id::SUBSCRIBER_CONNECTED);
         Ok(Self {
@@ -1076,11 +1063,7 @@ impl PoseSubscriber {
             .buffer_size(buffer)
             .history_request(history)
             .create()
-            .map_err(|e| ConnectError::Port {
-                port: "subscriber",
-                service: name.clone(),
-                detail: detail(e),
-            })?;
+            .map_err(|e| port_error("subscriber", &name, e))?;
         let signals = Signals::open(&node, &name)?;
         let _ = signals.notify(event_id::SUBSCRIBER_CONNECTED);
         Ok(Self {
