@@ -33,6 +33,9 @@ pub enum BenchCommand {
     Index(IndexArgs),
     /// The iceoryx2 bridge: one-way latency and throughput against a Unix-domain socket.
     Bridge(crate::bridge_cmd::BridgeBenchArgs),
+    /// The bridge's cost on a whole drive: simulate and match in one process, against
+    /// `qicp sim --publish` feeding `qicp match --subscribe` (wall times, JSON with --json).
+    BridgePark(crate::bridge_cmd::ParkBenchArgs),
 }
 
 /// Runs the command.
@@ -48,6 +51,7 @@ pub fn run(c: BenchCommand) -> Result<()> {
             Ok(())
         }
         BenchCommand::Bridge(a) => crate::bridge_cmd::run_bench(&a),
+        BenchCommand::BridgePark(a) => crate::bridge_cmd::run_park_bench(&a),
     }
 }
 

@@ -737,3 +737,273 @@ fn uds_run(ranges: &[f64], messages: usize, paced: bool, spin: bool) -> Result<R
         messages,
     })
 }
+
+// ---------------------------------------------------------------------------------------
+// qicp bench bridge-park
+
+/// Arguments of `qicp bench bridge-park`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ParkBenchArgs {
+    /// The drive to simulate.
+    #[arg(default_value = "configs/worlds/park.toml")]
+    pub config: PathBuf,
+    /// Matcher kind.
+    #[arg(long, default_value = "q-wsm")]
+    pub matcher: qicp_matchers::MatcherKind,
+    /// Runs of each arm, interleaved (in-process, two-process, in-process, …).
+    #[arg(long, default_value_t = 7)]
+    pub runs: usize,
+    /// Scratch directory for the outputs (default: a fresh one under the system temp dir).
+    #[arg(long)]
+    pub scratch: Option<PathBuf>,
+    /// Print one JSON object instead of a line.
+    #[arg(long)]
+    pub json: bool,
+    /// Internal: be the in-process arm, writing its outputs to this directory.
+    #[arg(long, hide = true)]
+    pub in_process_once: Option<PathBuf>,
+}
+
+/// Wall times of one arm (s).
+#[derive(Debug, Clone, Serialize)]
+pub struct ArmTimes {
+    /// Median over the runs.
+    pub median_s: f64,
+    /// Every run, in order.
+    pub runs_s: Vec<f64>,
+}
+
+impl ArmTimes {
+    fn of(runs_s: Vec<f64>) -> Self {
+        Self {
+            median_s: quantile(&runs_s, 0.5),
+            runs_s,
+        }
+    }
+}
+
+/// Result of `qicp bench bridge-park`.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParkBenchReport {
+    /// The drive.
+    pub config: String,
+    /// The matcher.
+    pub matcher: String,
+    /// Scans in the drive.
+    pub scans: u64,
+    /// `qicp bench bridge-park CONFIG --in-process-once DIR`: simulate and match in one
+    /// process; spawn to exit.
+    pub in_process: ArmTimes,
+    /// `qicp match --subscribe …` and `qicp sim CONFIG --publish …` spawned together; spawn
+    /// of the first to exit of the last.
+    pub two_process: ArmTimes,
+    /// `two_process.median_s / in_process.median_s`.
+    pub ratio: f64,
+    /// Whether every two-process trajectory equals the in-process one byte for byte.
+    pub identical: bool,
+    /// /proc/loadavg (1, 5, 15 min) at the start and at the end.
+    pub load: [[f64; 3]; 2],
+}
+
+fn load_average() -> [f64; 3] {
+    let text = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let mut it = text
+        .split_whitespace()
+        .map(|w| w.parse::<f64>().unwrap_or(f64::NAN));
+    [
+        it.next().unwrap_or(f64::NAN),
+        it.next().unwrap_or(f64::NAN),
+        it.next().unwrap_or(f64::NAN),
+    ]
+}
+
+/// The in-process arm: simulate the drive and match each scan as it is produced, then write
+/// what `qicp match --subscribe --out` writes (trajectory, per-scan figures, config, summary).
+fn park_in_process(config: &Path, kind: qicp_matchers::MatcherKind, out: &Path) -> Result<()> {
+    let cfg = qicp_sim::SimConfig::load(config)?;
+    let mut matcher = MatcherConfig::defaults(kind);
+    matcher.validate()?;
+    matcher.fill_defaults();
+    let mut matching = Matching::new(&matcher)?;
+    for record in qicp_sim::Simulation::new(cfg)? {
+        matching.push(&record?);
+    }
+    let run = matching.finish();
+    write_run(out, &run, &matcher)?;
+    let text = serde_json::to_string_pretty(&run.summary)?;
+    std::fs::write(out.join("summary.json"), text).context("writing summary.json")?;
+    Ok(())
+}
+
+/// Waits for every child (polling each millisecond, at most `timeout`); fails on a non-zero
+/// exit or the timeout (killing what still runs). Returns the stdout of each.
+fn wait_all(
+    children: &mut [(&'static str, std::process::Child)],
+    timeout: Duration,
+) -> Result<Vec<String>> {
+    use std::io::Read;
+    let deadline = Instant::now() + timeout;
+    let mut done = vec![false; children.len()];
+    let kill_all = |children: &mut [(&'static str, std::process::Child)]| {
+        for (_, c) in children.iter_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    };
+    while done.iter().any(|d| !d) {
+        let mut failed = None;
+        for (i, (name, child)) in children.iter_mut().enumerate() {
+            if done[i] {
+                continue;
+            }
+            if let Some(status) = child.try_wait()? {
+                done[i] = true;
+                if !status.success() {
+                    let mut err = String::new();
+                    if let Some(mut s) = child.stderr.take() {
+                        let _ = s.read_to_string(&mut err);
+                    }
+                    failed = Some(format!("{name} failed ({status}): {err}"));
+                    break;
+                }
+            }
+        }
+        if let Some(failure) = failed {
+            kill_all(children);
+            bail!(failure);
+        }
+        if Instant::now() > deadline {
+            kill_all(children);
+            bail!("bench children did not finish within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let mut outs = Vec::new();
+    for (_, child) in children.iter_mut() {
+        let mut out = String::new();
+        if let Some(mut s) = child.stdout.take() {
+            s.read_to_string(&mut out)?;
+        }
+        outs.push(out);
+    }
+    Ok(outs)
+}
+
+/// Runs `qicp bench bridge-park`: the whole park drive matched in one process against the
+/// same drive published by `qicp sim --publish` to `qicp match --subscribe`, both arms run
+/// as fresh processes of this binary, interleaved, `--runs` times each.
+pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
+    if let Some(out) = &args.in_process_once {
+        return park_in_process(&args.config, args.matcher, out);
+    }
+    anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
+    let exe = std::env::current_exe().context("locating the qicp binary")?;
+    let scratch = args.scratch.clone().unwrap_or_else(|| {
+        std::env::temp_dir().join(format!("qicp-bench-park-{}", std::process::id()))
+    });
+    std::fs::create_dir_all(&scratch)?;
+    let config = args.config.to_string_lossy().to_string();
+    let kind = args.matcher.name();
+    let spawn =
+        |name: &'static str, argv: &[&str]| -> Result<(&'static str, std::process::Child)> {
+            let child = std::process::Command::new(&exe)
+                .args(argv)
+                .stdin(std::process::Stdio::null())
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .with_context(|| format!("spawning {name}"))?;
+            Ok((name, child))
+        };
+    let timeout = Duration::from_secs(300);
+    let load_start = load_average();
+    let (mut inproc, mut twoproc) = (Vec::new(), Vec::new());
+    let mut identical = true;
+    let mut scans = 0;
+    for run in 0..args.runs {
+        let one = scratch.join("in-process");
+        let one_s = one.to_string_lossy().to_string();
+        let t0 = Instant::now();
+        let mut children = vec![spawn(
+            "in-process run",
+            &[
+                "bench",
+                "bridge-park",
+                &config,
+                "--matcher",
+                kind,
+                "--in-process-once",
+                &one_s,
+            ],
+        )?];
+        wait_all(&mut children, timeout)?;
+        inproc.push(t0.elapsed().as_secs_f64());
+
+        let two = scratch.join("two-process");
+        let two_s = two.to_string_lossy().to_string();
+        let _ = std::fs::remove_file(two.join("trajectory.tum"));
+        let prefix = format!("qicp-bench-park-{}-{run}", std::process::id());
+        let t0 = Instant::now();
+        let mut children = vec![
+            spawn(
+                "qicp match --subscribe",
+                &[
+                    "match",
+                    "--subscribe",
+                    "--matcher",
+                    kind,
+                    "--service-prefix",
+                    &prefix,
+                    "--out",
+                    &two_s,
+                ],
+            )?,
+            spawn(
+                "qicp sim --publish",
+                &["sim", &config, "--publish", "--service-prefix", &prefix],
+            )?,
+        ];
+        let outs = wait_all(&mut children, timeout)?;
+        twoproc.push(t0.elapsed().as_secs_f64());
+        let report: serde_json::Value =
+            serde_json::from_str(&outs[1]).context("reading the publisher's report")?;
+        scans = report["published"].as_u64().unwrap_or(0);
+        let read = |d: &Path| std::fs::read(d.join("trajectory.tum")).unwrap_or_default();
+        identical &= !read(&one).is_empty() && read(&one) == read(&two);
+    }
+    let in_process = ArmTimes::of(inproc);
+    let two_process = ArmTimes::of(twoproc);
+    let report = ParkBenchReport {
+        config,
+        matcher: kind.to_string(),
+        scans,
+        ratio: two_process.median_s / in_process.median_s,
+        in_process,
+        two_process,
+        identical,
+        load: [load_start, load_average()],
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{} scans, {}: in-process {:.3} s, two processes {:.3} s (median of {}), ratio {:.3}{}",
+            report.scans,
+            report.matcher,
+            report.in_process.median_s,
+            report.two_process.median_s,
+            args.runs,
+            report.ratio,
+            if report.identical {
+                ""
+            } else {
+                "; TRAJECTORIES DIFFER"
+            }
+        );
+    }
+    anyhow::ensure!(report.identical, "the two-process trajectory differs");
+    if args.scratch.is_none() {
+        let _ = std::fs::remove_dir_all(&scratch);
+    }
+    Ok(())
+}

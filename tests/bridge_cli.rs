@@ -462,69 +462,37 @@ fn subscriber_without_publisher_times_out() {
     assert_eq!(summary(&out)["bridge"]["end"], "no_publisher");
 }
 
-/// Wall time of the whole park drive, in one process against two (publisher + matcher).
-/// A measurement, not a check: run with
-/// `cargo test --release --test bridge_cli park_wall_time -- --ignored --nocapture`.
+/// `qicp bench bridge-park`: both arms run, the trajectories agree, the JSON has its keys.
+/// (The measurement itself: `qicp bench bridge-park --runs 9 --json`, see the README.)
 #[test]
-#[ignore = "measurement; prints the wall times of the full park drive"]
-fn park_wall_time() {
-    let dir = tempdir("park-wall");
-    let (mut inproc, mut twoproc) = (Vec::new(), Vec::new());
-    for _ in 0..7 {
-        let t0 = Instant::now();
-        let cfg = qicp_sim::SimConfig::load(Path::new(PARK)).expect("park config");
-        let (records, _, _) = qicp_sim::Simulation::run(cfg).expect("simulate");
-        let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
-        config.validate().expect("config");
-        config.fill_defaults();
-        let mut matching = Matching::new(&config).expect("matcher");
-        for r in &records {
-            matching.push(r);
-        }
-        write_run(&dir.join("inproc"), &matching.finish(), &config).expect("write");
-        let in_process = t0.elapsed();
-
-        let p = prefix("park-wall");
-        let out = dir.join("two");
-        let t0 = Instant::now();
-        let sub = Proc::spawn(
-            "subscriber",
-            &[
-                "match",
-                "--subscribe",
-                "--matcher",
-                "q-wsm",
-                "--service-prefix",
-                &p,
-                "--out",
-                &out.to_string_lossy(),
-            ],
-        );
-        let publ = Proc::spawn(
-            "publisher",
-            &["sim", PARK, "--publish", "--service-prefix", &p],
-        );
-        let (ps, _, perr) = publ.wait(T);
-        assert!(ps.success(), "{perr}");
-        let (ss, _, serr) = sub.wait(T);
-        assert!(ss.success(), "{serr}");
-        let two = t0.elapsed();
-        assert_same_run(&dir.join("inproc"), &out);
-        println!(
-            "park, {} scans, q-wsm: in-process {:.3} s, two processes {:.3} s",
-            records.len(),
-            in_process.as_secs_f64(),
-            two.as_secs_f64(),
-        );
-        inproc.push(in_process.as_secs_f64());
-        twoproc.push(two.as_secs_f64());
+fn bench_bridge_park_runs_both_arms() {
+    let dir = tempdir("bench-park");
+    let run = Proc::spawn(
+        "bench",
+        &[
+            "bench",
+            "bridge-park",
+            PARK,
+            "--runs",
+            "1",
+            "--json",
+            "--scratch",
+            &dir.to_string_lossy(),
+        ],
+    );
+    let (status, out, err) = run.wait(T);
+    assert!(status.success(), "{err}");
+    let report: serde_json::Value = serde_json::from_str(&out).expect("bench JSON");
+    assert_eq!(report["identical"], true, "{report}");
+    assert!(report["scans"].as_u64().unwrap_or(0) > 700, "{report}");
+    for arm in ["in_process", "two_process"] {
+        let median = report[arm]["median_s"].as_f64().expect("median");
+        assert!(median > 0.0 && median < 60.0, "{report}");
+        assert_eq!(report[arm]["runs_s"].as_array().map(Vec::len), Some(1));
     }
-    let (a, b) = (
-        qicp::matching::quantile(&inproc, 0.5),
-        qicp::matching::quantile(&twoproc, 0.5),
+    assert!(
+        report["ratio"].as_f64().is_some_and(|r| r > 0.0),
+        "{report}"
     );
-    println!(
-        "medians: in-process {a:.3} s, two processes {b:.3} s ({:+.1} %)",
-        (b / a - 1.0) * 100.0
-    );
+    assert!(dir.join("two-process/trajectory.tum").exists());
 }
