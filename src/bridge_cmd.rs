@@ -116,14 +116,81 @@ fn secs(s: f64) -> Duration {
     Duration::from_secs_f64(s.max(0.0))
 }
 
+/// Records a source may produce ahead of the publisher while it starts (about 1.5 MB of
+/// 181-beam scans).
+const PREFETCH: usize = 1024;
+
 /// Publishes `records` (in time order) on `<prefix>/scan`, then the end-of-stream marker.
+///
+/// Start-up overlaps with the source: while this thread sets up its iceoryx2 ports and waits
+/// for subscribers, a second thread already pulls records (a simulator computes its first
+/// scans), up to [`PREFETCH`] ahead. Once the subscribers are ready, that thread stops and
+/// hands the source back; this thread publishes what it made, then pulls the rest itself, so
+/// the drive does not pay a thread hand-off per record. Order, pacing (`--rate`, counted from
+/// the first scan sent) and back-pressure are unchanged.
 pub fn publish_records(
-    records: impl Iterator<Item = Result<Record>>,
+    records: impl Iterator<Item = Result<Record>> + Send,
     beams: usize,
     args: &PublishArgs,
 ) -> Result<PublishReport> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::sync_channel(PREFETCH);
+        let stop = &stop;
+        let source = std::thread::Builder::new()
+            .name("qicp-source".to_string())
+            .spawn_scoped(scope, move || {
+                let mut records = records;
+                while !stop.load(Ordering::Acquire) {
+                    let Some(record) = records.next() else { break };
+                    // The publisher gave up (an error, an interrupt): stop producing.
+                    if tx.send(record).is_err() {
+                        break;
+                    }
+                }
+                records
+            })
+            .context("starting the source thread")?;
+        // On an error `rx` is dropped on return: the source stops before the scope joins it.
+        let mut publisher = connect(beams, args)?;
+        stop.store(true, Ordering::Release);
+        let mut drive = Drive::new(args.rate);
+        // What the source made before it saw `stop`; the loop ends when it has returned.
+        for record in rx {
+            if !drive.publish(&mut publisher, record?)? {
+                break;
+            }
+        }
+        let records = source
+            .join()
+            .map_err(|_| anyhow::anyhow!("the record source panicked"))?;
+        if !drive.interrupted {
+            for record in records {
+                if !drive.publish(&mut publisher, record?)? {
+                    break;
+                }
+            }
+        }
+        publisher.end_of_stream()?;
+        let wall_seconds = drive.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        let subscribers_left = publisher.linger(secs(args.linger))?;
+        Ok(PublishReport {
+            service: publisher.service().to_string(),
+            backpressure: publisher.backpressure().name().to_string(),
+            published: publisher.sent(),
+            blocked_sends: publisher.blocked_sends(),
+            interrupted: drive.interrupted,
+            subscribers_left,
+            wall_seconds,
+        })
+    })
+}
+
+/// Creates the scan publisher and waits for the subscribers it needs.
+fn connect(beams: usize, args: &PublishArgs) -> Result<ScanPublisher> {
     let topics = Topics::new(&args.service_prefix);
-    let mut publisher = ScanPublisher::create(
+    let publisher = ScanPublisher::create(
         &topics,
         &PublisherOptions {
             backpressure: args.backpressure,
@@ -148,36 +215,46 @@ pub fn publish_records(
             );
         }
     }
-    let started = Instant::now();
-    let mut first_timestamp = None;
-    let mut interrupted = false;
-    for record in records {
-        let record = record?;
-        if let Some(speed) = args.rate.speed() {
-            let t0 = *first_timestamp.get_or_insert(record.timestamp());
-            let due = secs((record.timestamp() - t0) / speed);
+    Ok(publisher)
+}
+
+/// Pacing of a published drive.
+struct Drive {
+    rate: Rate,
+    started: Option<Instant>,
+    first_timestamp: f64,
+    interrupted: bool,
+}
+
+impl Drive {
+    fn new(rate: Rate) -> Self {
+        Self {
+            rate,
+            started: None,
+            first_timestamp: 0.0,
+            interrupted: false,
+        }
+    }
+
+    /// Publishes `record` when it is due; false once SIGINT/SIGTERM arrived (not published).
+    fn publish(&mut self, publisher: &mut ScanPublisher, record: Record) -> Result<bool> {
+        let started = *self.started.get_or_insert_with(|| {
+            self.first_timestamp = record.timestamp();
+            Instant::now()
+        });
+        if let Some(speed) = self.rate.speed() {
+            let due = secs((record.timestamp() - self.first_timestamp) / speed);
             if let Some(wait) = due.checked_sub(started.elapsed()) {
                 std::thread::sleep(wait);
             }
         }
         if publisher.interrupted() {
-            interrupted = true;
-            break;
+            self.interrupted = true;
+            return Ok(false);
         }
         publisher.publish(&record)?;
+        Ok(true)
     }
-    publisher.end_of_stream()?;
-    let wall_seconds = started.elapsed().as_secs_f64();
-    let subscribers_left = publisher.linger(secs(args.linger))?;
-    Ok(PublishReport {
-        service: topics.scan(),
-        backpressure: publisher.backpressure().name().to_string(),
-        published: publisher.sent(),
-        blocked_sends: publisher.blocked_sends(),
-        interrupted,
-        subscribers_left,
-        wall_seconds,
-    })
 }
 
 /// Prints a publisher's report on stdout.

@@ -577,6 +577,12 @@ impl ScanPublisher {
         self.core.sent
     }
 
+    /// The service name, `<prefix>/scan`.
+    #[must_use]
+    pub fn service(&self) -> &str {
+        &self.core.service
+    }
+
     /// Sends that found a subscriber's buffer full and had to wait (`block` mode).
     #[must_use]
     pub fn blocked_sends(&self) -> u64 {
