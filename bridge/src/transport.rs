@@ -246,14 +246,35 @@ fn service_name(name: &str) -> Result<ServiceName, ConnectError> {
     })
 }
 
-fn create_node() -> Result<Node<Ipc>, ConnectError> {
-    // iceoryx2 warns on stderr that it runs without a config file; qicp needs none.
-    // `IOX2_LOG_LEVEL` still overrides this.
-    static QUIET: std::sync::Once = std::sync::Once::new();
-    QUIET.call_once(|| set_log_level_from_env_or(LogLevel::Error));
-    NodeBuilder::new()
-        .create::<Ipc>()
-        .map_err(|e| ConnectError::Node { detail: detail(e) })
+type SharedNode = std::rc::Rc<Node<Ipc>>;
+
+thread_local! {
+    /// The node of this thread's ports, alive while any of them is.
+    static NODE: std::cell::RefCell<std::rc::Weak<Node<Ipc>>> =
+        const { std::cell::RefCell::new(std::rc::Weak::new()) };
+}
+
+/// The iceoryx2 node of this thread: every port created on a thread shares one node, so a
+/// process such as `qicp match --subscribe` (scan subscriber, pose publisher) registers once,
+/// and has one node to clean up when it exits. (iceoryx2's `ipc` ports stay on the thread
+/// that made them, so a node per thread is a node per port set.)
+fn shared_node() -> Result<SharedNode, ConnectError> {
+    NODE.with(|cell| {
+        if let Some(node) = cell.borrow().upgrade() {
+            return Ok(node);
+        }
+        // iceoryx2 warns on stderr that it runs without a config file; qicp needs none.
+        // `IOX2_LOG_LEVEL` still overrides this.
+        static QUIET: std::sync::Once = std::sync::Once::new();
+        QUIET.call_once(|| set_log_level_from_env_or(LogLevel::Error));
+        let node = std::rc::Rc::new(
+            NodeBuilder::new()
+                .create::<Ipc>()
+                .map_err(|e| ConnectError::Node { detail: detail(e) })?,
+        );
+        *cell.borrow_mut() = std::rc::Rc::downgrade(&node);
+        Ok(node)
+    })
 }
 
 /// The event half of a stream: wakes the other side.
@@ -341,7 +362,7 @@ impl Seen {
 struct PublisherCore {
     service: String,
     signals: Signals,
-    node: Node<Ipc>,
+    node: SharedNode,
     sent: u64,
     /// `SUBSCRIBER_READY` events seen since this publisher appeared.
     ready: std::cell::Cell<u64>,
@@ -349,7 +370,7 @@ struct PublisherCore {
 
 impl PublisherCore {
     /// A publisher's shared state, before anything has been sent.
-    fn new(service: String, signals: Signals, node: Node<Ipc>) -> Self {
+    fn new(service: String, signals: Signals, node: SharedNode) -> Self {
         Self {
             service,
             signals,
@@ -461,7 +482,7 @@ impl ScanPublisher {
     /// Opens (or creates) `<prefix>/scan` and a publisher on it.
     pub fn create(topics: &Topics, options: &PublisherOptions) -> Result<Self, ConnectError> {
         let name = topics.scan();
-        let node = create_node()?;
+        let node = shared_node()?;
         let service = scan_service_builder(&node, &service_name(&name)?)
             .enable_safe_overflow(options.backpressure.safe_overflow())
             .open_or_create()
@@ -652,7 +673,7 @@ impl PosePublisher {
     /// Opens (or creates) `<prefix>/pose` and a publisher on it.
     pub fn create(topics: &Topics) -> Result<Self, ConnectError> {
         let name = topics.pose();
-        let node = create_node()?;
+        let node = shared_node()?;
         let service = pose_service_builder(&node, &service_name(&name)?)
             .open_or_create()
             .map_err(|e| open_error(&name, BackPressure::DropOldest, e))?;
@@ -913,7 +934,7 @@ pub struct ScanSubscriber {
     polled_publishers: std::cell::Cell<usize>,
     service: publish_subscribe::PortFactory<Ipc, [f64], ScanHeader>,
     signals: Signals,
-    node: Node<Ipc>,
+    node: SharedNode,
     name: String,
     options: SubscriberOptions,
 }
@@ -924,7 +945,7 @@ impl ScanSubscriber {
     pub fn create(topics: &Topics, options: &SubscriberOptions) -> Result<Self, ConnectError> {
         let name = topics.scan();
         let (history, buffer) = subscriber_limits(options, SCAN_HISTORY_MAX, SCAN_BUFFER_MAX)?;
-        let node = create_node()?;
+        let node = shared_node()?;
         let sname = service_name(&name)?;
         let service = open_adopting(&name, options.backpressure, |overflow| {
             let b = scan_service_builder(&node, &sname);
@@ -1049,7 +1070,7 @@ pub struct PoseSubscriber {
     subscriber: Option<Subscriber<Ipc, PoseMessage, ()>>,
     service: publish_subscribe::PortFactory<Ipc, PoseMessage, ()>,
     signals: Signals,
-    node: Node<Ipc>,
+    node: SharedNode,
     name: String,
     options: SubscriberOptions,
 }
@@ -1060,7 +1081,7 @@ impl PoseSubscriber {
     pub fn create(topics: &Topics, options: &SubscriberOptions) -> Result<Self, ConnectError> {
         let name = topics.pose();
         let (history, buffer) = subscriber_limits(options, POSE_HISTORY_MAX, POSE_BUFFER_MAX)?;
-        let node = create_node()?;
+        let node = shared_node()?;
         let service = pose_service_builder(&node, &service_name(&name)?)
             .open_or_create()
             .map_err(|e| open_error(&name, BackPressure::DropOldest, e))?;
