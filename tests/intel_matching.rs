@@ -34,8 +34,9 @@ fn score(kind: MatcherKind) -> (f64, f64, usize) {
 #[test]
 fn q_wsm_on_intel_beats_rbpf_slam() {
     let (trans, rot, fallbacks) = score(MatcherKind::QWsm);
-    // RBPF SLAM scores 0.070 m; boosted scan matching alone must stay below 0.08 m.
-    assert!(trans < 0.08, "q-wsm mean translational error {trans:.4} m");
+    // RBPF SLAM scores 0.070 m, graph SLAM 0.031 m; boosted scan matching alone scores
+    // 0.023 m and must stay below 0.05 m.
+    assert!(trans < 0.05, "q-wsm mean translational error {trans:.4} m");
     assert!(rot < 1.0, "q-wsm mean rotational error {rot:.3}°");
     assert!(fallbacks <= 1, "only the first scan has nothing to match");
 }

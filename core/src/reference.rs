@@ -54,6 +54,11 @@ pub struct PointInfo {
     pub spacing: f64,
     /// Measurement covariance in the reference frame (m²).
     pub covariance: Matrix2<f64>,
+    /// How well the point's neighbours fit a straight line, from 0 (no neighbours, too few to
+    /// tell, or a curved surface such as a distant tree trunk) to 1 (a line within twice the
+    /// range noise). A point on a straight surface may correspond to any point along it; a
+    /// point on a trunk or a corner may not.
+    pub linearity: f64,
 }
 
 /// Two neighbouring beams' points lie on one surface when they are closer than this…
@@ -96,6 +101,7 @@ pub fn scan_point_info(scan: &Scan, noise: &LaserNoise) -> Vec<PointInfo> {
                     normal: Vector2::zeros(),
                     spacing: (range * step).max(1e-4),
                     covariance,
+                    linearity: 0.0,
                 };
             }
             let window = &pts[lo..=hi];
@@ -120,9 +126,24 @@ pub fn scan_point_info(scan: &Scan, noise: &LaserNoise) -> Vec<PointInfo> {
                 normal,
                 spacing: spacing.max(1e-4),
                 covariance,
+                linearity: linearity(sxx, sxy, syy, window.len(), noise.sigma_range),
             }
         })
         .collect()
+}
+
+/// Linearity of `n` points with scatter matrix `[[sxx, sxy], [sxy, syy]]` (about their mean):
+/// 1 when their spread across the fitted line, σ̂ = sqrt(λmin / (n − 2)), is within twice the
+/// range noise σ (real walls are a little rough), falling to 0 at 4σ. Two points always fit a
+/// line and prove nothing: 0.
+fn linearity(sxx: f64, sxy: f64, syy: f64, n: usize, sigma: f64) -> f64 {
+    if n < 3 || sigma <= 0.0 {
+        return 0.0;
+    }
+    let half_trace = 0.5 * (sxx + syy);
+    let lambda_min = (half_trace - (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt()).max(0.0);
+    let spread = (lambda_min / (n - 2) as f64).sqrt();
+    (2.0 - 0.5 * spread / sigma).clamp(0.0, 1.0)
 }
 
 /// A spatial index of reference points with a [`PointInfo`] per point.
@@ -213,6 +234,7 @@ impl<I: SpatialIndex> Reference<I> {
                 normal,
                 spacing: seen.spacing,
                 covariance: rot * seen.covariance * rot.transpose(),
+                linearity: seen.linearity,
             };
             if let Some(resolution) = merge {
                 let reach = info.spacing.max(resolution);

@@ -21,9 +21,11 @@ pub struct WsmParams {
     /// Scale of the sampling part of the correspondence error, uniform over the sample spacing
     /// s of the reference surface: variance (s²/12)·scale along the surface. Default 1.
     pub correspondence_scale: f64,
-    /// The sliding part of the correspondence error (m): how far along the surface the true
-    /// correspondent may lie because the pose is not yet exact. Adds its square to the
-    /// variance along the surface. Default 0.1.
+    /// The sliding part of the correspondence error (m): how far along a straight surface the
+    /// true correspondent may lie because the pose is not yet exact. Adds its square to the
+    /// variance along the surface where the reference point lies on a line; where it does not
+    /// (a tree trunk, a corner, a lone point; see [`PointInfo::linearity`]) the slide is at
+    /// most one sample spacing, which in a dense map is far less. Default 0.1.
     pub sigma_slide: f64,
     /// Share of the along-surface variance also assigned across the surface. Default 0.01.
     pub normal_fraction: f64,
@@ -79,8 +81,13 @@ impl WsmParams {
     /// along the surface with the sample spacing.
     #[must_use]
     pub fn correspondence_covariance(&self, at: &PointInfo) -> Matrix2<f64> {
+        // Along a straight surface the correspondent may slide by σslide; on a curved one (a
+        // trunk, a corner, a lone point) by no more than about one sample spacing.
+        let slide = self.sigma_slide * self.sigma_slide;
+        let l = at.linearity;
         let v = at.spacing * at.spacing / 12.0 * self.correspondence_scale
-            + self.sigma_slide * self.sigma_slide;
+            + l * slide
+            + (1.0 - l) * slide.min(at.spacing * at.spacing);
         if at.normal == Vector2::zeros() {
             return Matrix2::identity() * v;
         }
