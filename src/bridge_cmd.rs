@@ -121,6 +121,8 @@ fn secs(s: f64) -> Duration {
 const PREFETCH: usize = 1024;
 
 /// Publishes `records` (in time order) on `<prefix>/scan`, then the end-of-stream marker.
+/// No record may have more than `beams` ranges: the shared-memory segment is sized for
+/// that once ([`PublisherOptions::fixed_size`]).
 ///
 /// Start-up overlaps with the source: while this thread sets up its iceoryx2 ports and waits
 /// for subscribers, a second thread already pulls records (a simulator computes its first
@@ -195,6 +197,7 @@ fn connect(beams: usize, args: &PublishArgs) -> Result<ScanPublisher> {
         &PublisherOptions {
             backpressure: args.backpressure,
             beams,
+            fixed_size: true,
             block_timeout: secs(args.block_timeout),
         },
     )?;
@@ -282,7 +285,12 @@ pub fn run_replay(args: ReplayArgs) -> Result<()> {
         bail!("qicp replay publishes a log: give --publish");
     }
     let log = load_for_command(&args.log, args.lenient)?;
-    let beams = log.records.first().map_or(1, |r| r.scan.beams());
+    let beams = log
+        .records
+        .iter()
+        .map(|r| r.scan.beams())
+        .max()
+        .unwrap_or(1);
     let report = publish_records(log.records.into_iter().map(Ok), beams, &args.bridge)?;
     print_publish_report(&report)
 }
@@ -660,6 +668,7 @@ fn iceoryx2_run(ranges: &[f64], messages: usize, paced: bool, spin: bool) -> Res
             &topics,
             &PublisherOptions {
                 beams: owned.len(),
+                fixed_size: true,
                 ..PublisherOptions::default()
             },
         )?;
