@@ -43,6 +43,9 @@ pub const MAX_SUBSCRIBERS: usize = 8;
 /// Publishers per stream (one live; room for a dead one not yet cleaned up).
 pub const MAX_PUBLISHERS: usize = 4;
 
+/// How often a waiting publisher removes dead nodes (a killed subscriber stops counting).
+const CLEANUP_EVERY: Duration = Duration::from_millis(100);
+
 /// Event ids on a stream's event service.
 pub mod event_id {
     /// A publisher sent a sample (data or end-of-stream).
@@ -274,8 +277,16 @@ fn shared_node() -> Result<SharedNode, ConnectError> {
         // `IOX2_LOG_LEVEL` still overrides this.
         static QUIET: std::sync::Once = std::sync::Once::new();
         QUIET.call_once(|| set_log_level_from_env_or(LogLevel::Error));
+        // Dead nodes are removed where they matter: iceoryx2 does it when a service is
+        // opened (`cleanup_dead_nodes_on_open`), and qicp's waits do it on their ticks. The
+        // node-wide scans when a node is created and dropped (~1 ms each: every node's
+        // details are read and parsed) add nothing to that.
+        let mut config = iceoryx2::config::Config::global_config().clone();
+        config.global.node.cleanup_dead_nodes_on_creation = false;
+        config.global.node.cleanup_dead_nodes_on_destruction = false;
         let node = std::rc::Rc::new(
             NodeBuilder::new()
+                .config(&config)
                 .create::<Ipc>()
                 .map_err(|e| ConnectError::Node { detail: detail(e) })?,
         );
@@ -404,8 +415,14 @@ impl PublisherCore {
             service: self.service.clone(),
             detail,
         };
+        // Listing the nodes costs ~1 ms; events come in bursts at start-up, so clean up at
+        // most once per `CLEANUP_EVERY`, starting with the first look.
+        let mut last_cleanup: Option<Instant> = None;
         loop {
-            self.node.try_cleanup_dead_nodes();
+            if last_cleanup.is_none_or(|t| t.elapsed() >= CLEANUP_EVERY) {
+                self.node.try_cleanup_dead_nodes();
+                last_cleanup = Some(Instant::now());
+            }
             let seen = self.signals.drain().map_err(wait_error)?;
             self.ready.set(self.ready.get() + seen.ready);
             if holds(subscribers(), self.ready.get()) {
@@ -648,6 +665,10 @@ impl ScanPublisher {
     /// After the end-of-stream marker: waits (with `timeout`) until every subscriber has
     /// left, so none loses what is still in its buffer when this process exits.
     pub fn linger(&self, timeout: Duration) -> Result<bool, ReceiveError> {
+        // Nobody there: nothing to wait for, and a dead-node cleanup could only lower the count.
+        if self.subscribers() == 0 {
+            return Ok(true);
+        }
         self.core
             .wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
     }
@@ -749,6 +770,10 @@ impl PosePublisher {
 
     /// Waits until every pose subscriber has left (or `timeout`).
     pub fn linger(&self, timeout: Duration) -> Result<bool, ReceiveError> {
+        // Nobody there: nothing to wait for, and a dead-node cleanup could only lower the count.
+        if self.subscribers() == 0 {
+            return Ok(true);
+        }
         self.core
             .wait_until(timeout, &|| self.subscribers(), &|k, _| k == 0)
     }
