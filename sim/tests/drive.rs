@@ -133,7 +133,12 @@ fn park_drive_is_realistic() {
     assert!(s.path_length_m > 150.0, "{s:?}");
     // Starts in the bottom-right corner; the loop is clockwise (negative signed area).
     let start = records[0].truth.expect("truth");
-    assert!(start.x > 60.0 && start.y < 10.0, "{start:?}");
+    let (lo, hi) = world.bounds;
+    let (w, h) = (hi.x - lo.x, hi.y - lo.y);
+    assert!(
+        start.x > lo.x + 0.6 * w && start.y < lo.y + 0.4 * h,
+        "{start:?}"
+    );
     let area: f64 = records
         .windows(2)
         .map(|w| {

@@ -7,7 +7,8 @@
 use qicp_sim::{SimConfig, Simulation, digest};
 use std::path::PathBuf;
 
-const PARK_30_SCANS: u64 = 0x37ff_6f69_f6bb_521c;
+const PARK_30_SCANS: u64 = 0x61e7_d379_e38e_07be;
+const SPARSE_PARK_30_SCANS: u64 = 0x37ff_6f69_f6bb_521c;
 const CORRIDOR_40_SCANS: u64 = 0x5645_2517_c265_5b4d;
 
 fn short(name: &str, scans: usize) -> SimConfig {
@@ -37,10 +38,11 @@ fn the_same_config_and_seed_give_identical_records() {
 #[test]
 fn golden_digests_of_the_shipped_drives() {
     let park = digest_of(short("park.toml", 30));
+    let sparse = digest_of(short("park-sparse.toml", 30));
     let corridor = digest_of(short("corridor.toml", 40));
     assert_eq!(
-        (park, corridor),
-        (PARK_30_SCANS, CORRIDOR_40_SCANS),
-        "digests moved: park {park:#018x}, corridor {corridor:#018x}"
+        (park, sparse, corridor),
+        (PARK_30_SCANS, SPARSE_PARK_30_SCANS, CORRIDOR_40_SCANS),
+        "digests moved: park {park:#018x}, sparse park {sparse:#018x}, corridor {corridor:#018x}"
     );
 }
