@@ -9,6 +9,7 @@
 //! # groundtruth = "truth.tum"  # TUM file or CARMEN log with TRUEPOS (log only)
 //! # max_scans = 100            # only the first scans (default: all)
 //! # seed = 3                   # override the drive's noise seed (sim only)
+//! # world_seed = 8             # override the world's layout seed (sim only)
 //! # lenient = false            # skip and count malformed log lines (log only)
 //!
 //! [run]
@@ -28,6 +29,12 @@
 //! - `config.toml`: the effective experiment, every matcher's parameters spelled out (it runs
 //!   again as is);
 //! - `map_<kind>.png`, `trajectories.png`, `residual.png`, `certainty.png`.
+//!
+//! With `--worlds N` (a `sim` source) the experiment runs on N layouts of the world, seeds
+//! `world_seed`, `world_seed + 1`, … (default: the world config's seed), each in
+//! `DIR/world-<seed>/` without pictures; `DIR/worlds.json` and the printed table give the
+//! median, minimum and maximum of every figure over the worlds. One layout can be lucky or
+//! unlucky; the medians are what a method should be judged by.
 
 use crate::eval::{
     AteOptions, AteReport, LogPoses, RelationsReport, evaluate_ate, evaluate_relations,
@@ -77,6 +84,10 @@ pub struct RunArgs {
     /// Override `[source] max_scans`.
     #[arg(long)]
     pub max_scans: Option<usize>,
+    /// Repeat the experiment on this many layouts of the simulated world (seeds from
+    /// `[source] world_seed`, or the world config's, upwards) and report medians.
+    #[arg(long, value_name = "N")]
+    pub worlds: Option<usize>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -144,6 +155,10 @@ pub struct SourceConfig {
     /// Override the drive's `[drive] seed` (sim only). Default: the drive's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
+    /// Override the world's `[world] seed`, its procedural layout (sim only). Default: the
+    /// world's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_seed: Option<u64>,
     /// Skip and count malformed log lines instead of failing (log only). Default false.
     #[serde(default)]
     pub lenient: bool,
@@ -249,8 +264,13 @@ impl ExperimentConfig {
                 }
             }
             (None, Some(_)) => {
-                if s.seed.is_some() {
-                    return Err(invalid("source.seed", "only for a `sim` source"));
+                for (key, set) in [
+                    ("source.seed", s.seed.is_some()),
+                    ("source.world_seed", s.world_seed.is_some()),
+                ] {
+                    if set {
+                        return Err(invalid(key, "only for a `sim` source"));
+                    }
                 }
             }
         }
@@ -358,6 +378,9 @@ impl Source {
                 .with_context(|| format!("loading drive {}", sim.display()))?;
             if let Some(seed) = c.seed {
                 cfg.drive.seed = seed;
+            }
+            if let Some(seed) = c.world_seed {
+                cfg.world.seed = seed;
             }
             if c.max_scans.is_some() {
                 cfg.drive.max_scans = c.max_scans;
@@ -611,7 +634,29 @@ pub fn run(args: RunArgs) -> Result<()> {
             .map_or("experiment".into(), |s| s.to_string_lossy().into_owned());
         PathBuf::from("out").join(stem)
     });
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    if let Some(n) = args.worlds {
+        return run_worlds(&args, &config, &out, n, started);
+    }
+    let summary = run_once(&args, &config, &out, true, started)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else if !args.quiet {
+        println!("{}", table(&summary, &config.run.matchers));
+        println!("outputs in {}", out.display());
+    }
+    Ok(())
+}
+
+/// One experiment into `out`: its records, every matcher, the scores, the pictures (when
+/// `pictures`) and `summary.json`, which it returns.
+fn run_once(
+    args: &RunArgs,
+    config: &ExperimentConfig,
+    out: &Path,
+    pictures: bool,
+    started: Instant,
+) -> Result<Value> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     std::fs::write(out.join("config.toml"), config.effective_toml()?)
         .with_context(|| format!("writing {}", out.join("config.toml").display()))?;
 
@@ -646,7 +691,11 @@ pub fn run(args: RunArgs) -> Result<()> {
     let matching_seconds: f64 = outcomes.iter().map(|o| o.seconds).sum();
 
     let t = Instant::now();
-    let pictures = draw_pictures(&out, &source, &odometry, &outcomes)?;
+    let pictures = if pictures {
+        draw_pictures(out, &source, &odometry, &outcomes)?
+    } else {
+        json!({})
+    };
     let plot_seconds = t.elapsed().as_secs_f64();
 
     let mut matchers = Map::new();
@@ -672,13 +721,212 @@ pub fn run(args: RunArgs) -> Result<()> {
     let text = serde_json::to_string_pretty(&summary)?;
     std::fs::write(out.join("summary.json"), format!("{text}\n"))
         .with_context(|| format!("writing {}", out.join("summary.json").display()))?;
+    Ok(summary)
+}
+
+/// Figures of one matcher summarised over the worlds of `--worlds`.
+const WORLD_FIGURES: [&str; 7] = [
+    "ate_rmse_m",
+    "final_error_m",
+    "rpe_trans_per_m",
+    "residual_mean_mm",
+    "certainty_mean",
+    "ms_per_scan_median",
+    "fallbacks",
+];
+
+/// Ratios of a boosted / incremental pair summarised over the worlds of `--worlds`.
+const WORLD_RATIOS: [&str; 5] = [
+    "ate",
+    "final_error",
+    "residual",
+    "certainty",
+    "certainty_per_scan_median",
+];
+
+/// `{"median", "min", "max"}` of the finite values (the median of an even count is the mean
+/// of the two middle values); nulls when there are none.
+fn spread(values: &[f64]) -> Value {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return json!({"median": null, "min": null, "max": null});
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    let median = if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    };
+    json!({"median": median, "min": v[0], "max": v[n - 1]})
+}
+
+/// `qicp run --worlds N`: the experiment on N layouts of the simulated world.
+fn run_worlds(
+    args: &RunArgs,
+    config: &ExperimentConfig,
+    out: &Path,
+    n: usize,
+    started: Instant,
+) -> Result<()> {
+    let Some(sim) = &config.source.sim else {
+        anyhow::bail!("--worlds needs a `sim` source: a log has one world");
+    };
+    if n == 0 {
+        anyhow::bail!("--worlds 0: nothing would run");
+    }
+    let first = match config.source.world_seed {
+        Some(seed) => seed,
+        None => {
+            qicp_sim::SimConfig::load(sim)
+                .with_context(|| format!("loading drive {}", sim.display()))?
+                .world
+                .seed
+        }
+    };
+    let seeds: Vec<u64> = (0..n as u64).map(|k| first + k).collect();
+    let mut summaries = Vec::with_capacity(n);
+    for (k, &seed) in seeds.iter().enumerate() {
+        if !args.quiet {
+            eprintln!("world {}/{n} (seed {seed})", k + 1);
+        }
+        let mut c = config.clone();
+        c.source.world_seed = Some(seed);
+        let dir = out.join(format!("world-{seed}"));
+        summaries.push(
+            run_once(args, &c, &dir, false, Instant::now())
+                .with_context(|| format!("world seed {seed}"))?,
+        );
+    }
+    let collect = |get: &dyn Fn(&Value) -> &Value| -> Vec<f64> {
+        summaries
+            .iter()
+            .map(|s| get(s).as_f64().unwrap_or(f64::NAN))
+            .collect()
+    };
+    let mut matchers = Map::new();
+    for kind in &config.run.matchers {
+        let mut m = Map::new();
+        for figure in WORLD_FIGURES {
+            let values = collect(&|s| &s["matchers"][kind.name()][figure]);
+            m.insert(figure.into(), spread(&values));
+        }
+        matchers.insert(kind.name().into(), Value::Object(m));
+    }
+    let mut ratios = Map::new();
+    if let Some(pairs) = summaries[0]["ratios"].as_object() {
+        for pair in pairs.keys() {
+            let mut m = Map::new();
+            for figure in WORLD_RATIOS {
+                let values = collect(&|s| &s["ratios"][pair][figure]);
+                m.insert(figure.into(), spread(&values));
+            }
+            ratios.insert(pair.clone(), Value::Object(m));
+        }
+    }
+    let report = json!({
+        "source": summaries[0]["source"],
+        "config": args.config.display().to_string(),
+        "world_seeds": seeds,
+        "scans": spread(&collect(&|s| &s["scans"])),
+        "matchers": matchers,
+        "ratios": ratios,
+        "wall_seconds": started.elapsed().as_secs_f64(),
+    });
+    let text = serde_json::to_string_pretty(&report)?;
+    let path = out.join("worlds.json");
+    std::fs::write(&path, format!("{text}\n"))
+        .with_context(|| format!("writing {}", path.display()))?;
     if args.json {
         println!("{text}");
     } else if !args.quiet {
-        println!("{}", table(&summary, &config.run.matchers));
+        println!("{}", worlds_table(&report, &config.run.matchers));
         println!("outputs in {}", out.display());
     }
     Ok(())
+}
+
+/// The table printed after `--worlds`: median [min-max] of each figure.
+fn worlds_table(report: &Value, kinds: &[MatcherKind]) -> String {
+    let cell = |v: &Value, scale: f64, digits: usize| match (
+        v["median"].as_f64(),
+        v["min"].as_f64(),
+        v["max"].as_f64(),
+    ) {
+        (Some(m), Some(lo), Some(hi)) => format!(
+            "{:.digits$} [{:.digits$}-{:.digits$}]",
+            m * scale,
+            lo * scale,
+            hi * scale
+        ),
+        _ => "-".into(),
+    };
+    let columns: [(&str, &str, f64, usize); 5] = [
+        ("ATE m", "ate_rmse_m", 1.0, 2),
+        ("final m", "final_error_m", 1.0, 2),
+        ("resid. mm", "residual_mean_mm", 1.0, 1),
+        ("certainty mm", "certainty_mean", 1e3, 1),
+        ("ms/scan", "ms_per_scan_median", 1.0, 2),
+    ];
+    let mut rows = vec![
+        std::iter::once("matcher".to_string())
+            .chain(columns.iter().map(|c| c.0.to_string()))
+            .collect::<Vec<_>>(),
+    ];
+    for k in kinds {
+        let m = &report["matchers"][k.name()];
+        rows.push(
+            std::iter::once(k.name().to_string())
+                .chain(columns.iter().map(|c| cell(&m[c.1], c.2, c.3)))
+                .collect(),
+        );
+    }
+    let widths: Vec<usize> = (0..rows[0].len())
+        .map(|c| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0))
+        .collect();
+    let mut text = format!(
+        "{} — {} worlds (seeds {}), median [min-max]\n",
+        report["source"].as_str().unwrap_or("?"),
+        report["world_seeds"].as_array().map_or(0, Vec::len),
+        report["world_seeds"]
+            .as_array()
+            .map(|s| {
+                let s: Vec<String> = s.iter().map(ToString::to_string).collect();
+                s.join(", ")
+            })
+            .unwrap_or_default(),
+    );
+    for r in rows {
+        let cells: Vec<String> = r
+            .iter()
+            .enumerate()
+            .map(|(c, s)| {
+                if c == 0 {
+                    format!("{s:<w$}", w = widths[c])
+                } else {
+                    format!("{s:>w$}", w = widths[c])
+                }
+            })
+            .collect();
+        text += &cells.join("  ");
+        text.push('\n');
+    }
+    if let Some(ratios) = report["ratios"].as_object().filter(|r| !r.is_empty()) {
+        text += "\nboosted / incremental, median [min-max]:";
+        for (pair, r) in ratios {
+            let parts: Vec<String> = ["ate", "residual", "certainty"]
+                .iter()
+                .map(|k| format!("{k} {}", cell(&r[*k], 1.0, 3)))
+                .collect();
+            text += &format!("\n  {pair}: {}", parts.join(", "));
+        }
+        text.push('\n');
+    }
+    text += &format!(
+        "\nwall time {:.1} s",
+        report["wall_seconds"].as_f64().unwrap_or(f64::NAN)
+    );
+    text
 }
 
 fn write_trajectory(path: &Path, traj: &[Stamped]) -> Result<()> {

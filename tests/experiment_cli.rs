@@ -218,6 +218,10 @@ fn bad_experiment_configs_name_the_key() {
             "source.relations",
         ),
         (
+            "[source]\nlog = \"x.clf\"\nworld_seed = 3\n".to_string(),
+            "source.world_seed",
+        ),
+        (
             format!("[source]\nsim = \"{park}\"\n[run]\nmatchers = []\n"),
             "run.matchers",
         ),
@@ -252,5 +256,87 @@ fn bad_experiment_configs_name_the_key() {
             "`{key}` not named for\n{text}\n{stderr}"
         );
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn worlds_repeats_the_experiment_on_other_layouts_and_reports_medians() {
+    let config = repo().join("tests/fixtures/park_short.toml");
+    let out = out_dir("worlds");
+    let o = qicp_run(
+        &config,
+        &out,
+        &["--max-scans", "30", "--worlds", "3", "--json"],
+    );
+    assert_success(&o);
+    let report: Value = serde_json::from_slice(&o.stdout).expect("worlds.json on stdout");
+    let seeds: Vec<u64> = report["world_seeds"]
+        .as_array()
+        .expect("world_seeds")
+        .iter()
+        .map(|s| s.as_u64().expect("seed"))
+        .collect();
+    assert_eq!(seeds.len(), 3);
+    assert_eq!(seeds[1], seeds[0] + 1);
+    assert_eq!(seeds[2], seeds[0] + 2);
+    // Every world has its own complete run, on its own layout.
+    let mut ates = Vec::new();
+    for seed in &seeds {
+        let dir = out.join(format!("world-{seed}"));
+        let summary: Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("summary.json")).expect("world summary"),
+        )
+        .expect("json");
+        assert_eq!(summary["scans"], 30);
+        for kind in KINDS {
+            assert!(dir.join(kind).join("trajectory.tum").is_file());
+        }
+        let config = std::fs::read_to_string(dir.join("config.toml")).expect("config");
+        assert!(config.contains(&format!("world_seed = {seed}")), "{config}");
+        ates.push(
+            summary["matchers"]["q-wsm"]["ate_rmse_m"]
+                .as_f64()
+                .expect("ate"),
+        );
+    }
+    assert!(
+        ates.iter().any(|a| *a != ates[0]),
+        "three layouts gave the same q-wsm ATE {ates:?}"
+    );
+    // The report is the median, minimum and maximum of the worlds' figures.
+    let ate = &report["matchers"]["q-wsm"]["ate_rmse_m"];
+    ates.sort_by(f64::total_cmp);
+    assert_eq!(ate["median"].as_f64(), Some(ates[1]));
+    assert_eq!(ate["min"].as_f64(), Some(ates[0]));
+    assert_eq!(ate["max"].as_f64(), Some(ates[2]));
+    for pair in ["q-wsm/wsm", "q-idc/idc"] {
+        let r = &report["ratios"][pair]["residual"];
+        let (lo, med, hi) = (
+            r["min"].as_f64().expect("min"),
+            r["median"].as_f64().expect("median"),
+            r["max"].as_f64().expect("max"),
+        );
+        assert!(lo <= med && med <= hi, "{pair}: {r}");
+    }
+    assert!(out.join("worlds.json").is_file());
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn worlds_needs_a_simulated_source() {
+    let dir = out_dir("worlds-log");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let log = dir.join("tiny.clf");
+    std::fs::write(&log, "ODOM 0 0 0 0 0 0 1.0 host 1.0\n").expect("write log");
+    let config = dir.join("log.toml");
+    std::fs::write(&config, format!("[source]\nlog = \"{}\"\n", log.display()))
+        .expect("write config");
+    let o = qicp_run(&config, &dir.join("out"), &["--worlds", "2", "--quiet"]);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--worlds needs a `sim` source"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
