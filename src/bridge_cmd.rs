@@ -857,15 +857,32 @@ pub struct ArmTimes {
     pub median_s: f64,
     /// Every run, in order.
     pub runs_s: Vec<f64>,
+    /// CPU time (user + system) of the arm's processes, mean per run (s; from the kernel's
+    /// accounting of reaped children, 10 ms ticks; `null` where /proc is missing).
+    pub cpu_s: Option<f64>,
 }
 
 impl ArmTimes {
-    fn of(runs_s: Vec<f64>) -> Self {
+    fn of(runs_s: Vec<f64>, cpu_total_s: Option<f64>) -> Self {
+        let n = runs_s.len().max(1) as f64;
         Self {
             median_s: quantile(&runs_s, 0.5),
             runs_s,
+            cpu_s: cpu_total_s.map(|c| c / n),
         }
     }
+}
+
+/// CPU seconds (user + system) of this process's reaped children so far: `cutime + cstime`
+/// of /proc/self/stat, in USER_HZ (100 per second on Linux).
+fn children_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces) start at field 3 (state);
+    // cutime and cstime are fields 16 and 17.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| fields.get(i - 3)?.parse::<f64>().ok();
+    Some((ticks(16)? + ticks(17)?) / 100.0)
 }
 
 /// Result of `qicp bench bridge-park`.
@@ -1004,11 +1021,19 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
     let timeout = Duration::from_secs(300);
     let load_start = load_average();
     let (mut inproc, mut twoproc) = (Vec::new(), Vec::new());
+    let (mut inproc_cpu, mut twoproc_cpu) = (Some(0.0), Some(0.0));
+    let add = |total: &mut Option<f64>, before: Option<f64>| {
+        *total = match (*total, before, children_cpu_s()) {
+            (Some(t), Some(b), Some(a)) => Some(t + a - b),
+            _ => None,
+        };
+    };
     let mut identical = true;
     let mut scans = 0;
     for run in 0..args.runs {
         let one = scratch.join("in-process");
         let one_s = one.to_string_lossy().to_string();
+        let cpu0 = children_cpu_s();
         let t0 = Instant::now();
         let mut children = vec![spawn(
             "in-process run",
@@ -1024,11 +1049,13 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
         )?];
         wait_all(&mut children, timeout)?;
         inproc.push(t0.elapsed().as_secs_f64());
+        add(&mut inproc_cpu, cpu0);
 
         let two = scratch.join("two-process");
         let two_s = two.to_string_lossy().to_string();
         let _ = std::fs::remove_file(two.join("trajectory.tum"));
         let prefix = format!("qicp-bench-park-{}-{run}", std::process::id());
+        let cpu0 = children_cpu_s();
         let t0 = Instant::now();
         let mut children = vec![
             spawn(
@@ -1051,14 +1078,15 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
         ];
         let outs = wait_all(&mut children, timeout)?;
         twoproc.push(t0.elapsed().as_secs_f64());
+        add(&mut twoproc_cpu, cpu0);
         let report: serde_json::Value =
             serde_json::from_str(&outs[1]).context("reading the publisher's report")?;
         scans = report["published"].as_u64().unwrap_or(0);
         let read = |d: &Path| std::fs::read(d.join("trajectory.tum")).unwrap_or_default();
         identical &= !read(&one).is_empty() && read(&one) == read(&two);
     }
-    let in_process = ArmTimes::of(inproc);
-    let two_process = ArmTimes::of(twoproc);
+    let in_process = ArmTimes::of(inproc, inproc_cpu);
+    let two_process = ArmTimes::of(twoproc, twoproc_cpu);
     let report = ParkBenchReport {
         config,
         matcher: kind.to_string(),
@@ -1072,14 +1100,19 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
+        let cpu = |a: &ArmTimes| a.cpu_s.map_or("?".to_string(), |c| format!("{c:.3}"));
         println!(
-            "{} scans, {}: in-process {:.3} s, two processes {:.3} s (median of {}), ratio {:.3}{}",
+            "{} scans, {}: in-process {:.3} s, two processes {:.3} s (median of {}), ratio {:.3}; \
+             CPU per run {} s against {} s; load {:.2}{}",
             report.scans,
             report.matcher,
             report.in_process.median_s,
             report.two_process.median_s,
             args.runs,
             report.ratio,
+            cpu(&report.in_process),
+            cpu(&report.two_process),
+            report.load[0][0],
             if report.identical {
                 ""
             } else {
