@@ -30,11 +30,12 @@
 //!   again as is);
 //! - `map_<kind>.png`, `trajectories.png`, `residual.png`, `certainty.png`.
 //!
-//! With `--worlds N` (a `sim` source) the experiment runs on N layouts of the world, seeds
-//! `world_seed`, `world_seed + 1`, … (default: the world config's seed), each in
-//! `DIR/world-<seed>/` without pictures; `DIR/worlds.json` and the printed table give the
-//! median, minimum and maximum of every figure over the worlds. One layout can be lucky or
-//! unlucky; the medians are what a method should be judged by.
+//! With `--worlds N` (a `sim` source) the experiment runs on N worlds: layout seeds
+//! `world_seed`, `world_seed + 1`, … and noise seeds `seed`, `seed + 1`, … (defaults: the drive
+//! config's), each in `DIR/world-<layout seed>/` without pictures; `DIR/worlds.json` and the
+//! printed table give the median, minimum and maximum of every figure over the worlds. One
+//! layout or one noise draw can be lucky or unlucky; the medians are what a method should be
+//! judged by. (The corridor's layout is fixed; there only the noise changes.)
 
 use crate::eval::{
     AteOptions, AteReport, LogPoses, RelationsReport, evaluate_ate, evaluate_relations,
@@ -84,8 +85,8 @@ pub struct RunArgs {
     /// Override `[source] max_scans`.
     #[arg(long)]
     pub max_scans: Option<usize>,
-    /// Repeat the experiment on this many layouts of the simulated world (seeds from
-    /// `[source] world_seed`, or the world config's, upwards) and report medians.
+    /// Repeat the experiment on this many simulated worlds (layout and noise seeds from the
+    /// config's upwards) and report medians.
     #[arg(long, value_name = "N")]
     pub worlds: Option<usize>,
 }
@@ -775,15 +776,10 @@ fn run_worlds(
     if n == 0 {
         anyhow::bail!("--worlds 0: nothing would run");
     }
-    let first = match config.source.world_seed {
-        Some(seed) => seed,
-        None => {
-            qicp_sim::SimConfig::load(sim)
-                .with_context(|| format!("loading drive {}", sim.display()))?
-                .world
-                .seed
-        }
-    };
+    let drive = qicp_sim::SimConfig::load(sim)
+        .with_context(|| format!("loading drive {}", sim.display()))?;
+    let first = config.source.world_seed.unwrap_or(drive.world.seed);
+    let first_noise = config.source.seed.unwrap_or(drive.drive.seed);
     let seeds: Vec<u64> = (0..n as u64).map(|k| first + k).collect();
     let mut summaries = Vec::with_capacity(n);
     for (k, &seed) in seeds.iter().enumerate() {
@@ -792,6 +788,7 @@ fn run_worlds(
         }
         let mut c = config.clone();
         c.source.world_seed = Some(seed);
+        c.source.seed = Some(first_noise + k as u64);
         let dir = out.join(format!("world-{seed}"));
         summaries.push(
             run_once(args, &c, &dir, false, Instant::now())
@@ -828,6 +825,7 @@ fn run_worlds(
         "source": summaries[0]["source"],
         "config": args.config.display().to_string(),
         "world_seeds": seeds,
+        "noise_seeds": (0..n as u64).map(|k| first_noise + k).collect::<Vec<_>>(),
         "scans": spread(&collect(&|s| &s["scans"])),
         "matchers": matchers,
         "ratios": ratios,

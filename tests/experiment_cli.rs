@@ -293,6 +293,10 @@ fn worlds_repeats_the_experiment_on_other_layouts_and_reports_medians() {
         }
         let config = std::fs::read_to_string(dir.join("config.toml")).expect("config");
         assert!(config.contains(&format!("world_seed = {seed}")), "{config}");
+        assert!(
+            config.contains("\nseed = "),
+            "the noise seed advances too: {config}"
+        );
         ates.push(
             summary["matchers"]["q-wsm"]["ate_rmse_m"]
                 .as_f64()
