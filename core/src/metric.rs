@@ -62,16 +62,36 @@ impl CorrespondenceMetric for ClosestPoint {
 /// Slack of the matching-range rule's search radius beyond r·window (m).
 const RANGE_RULE_MARGIN: f64 = 0.1;
 
+/// The matching-range rule searches a little farther than it needs (m), so that its
+/// candidates still cover the next iterations' searches while the estimate moves less than
+/// this.
+const RANGE_RULE_CACHE_SLACK: f64 = 0.05;
+
+/// One scan point's cached radius search: every reference point within `radius` of `center`.
+#[derive(Debug, Clone, Default)]
+struct CachedSearch {
+    center: Point2<f64>,
+    radius: f64,
+    found: Vec<crate::Neighbour>,
+}
+
 /// IDC's matching-range rule (Lu & Milios 1997, Sec. 4.2): in polar coordinates about the
 /// sensor, a scan point at (r, φ) pairs with the reference point inside the angular window
 /// φ ± `window` whose range is closest to r. Like every pair it must lie within the outlier
 /// gate `max_dist` of the point: in a symmetric corridor the opposite wall has the same range
 /// inside a wide window.
+///
+/// The candidates of each scan point come from a radius search that is kept between calls of
+/// one scan (see [`begin_scan`](CorrespondenceMetric::begin_scan)): while the point has moved
+/// less than the search's slack it is filtered again instead of repeated, with the same
+/// answer as a fresh search.
 #[derive(Debug, Clone, Default)]
 pub struct MatchingRange {
     /// Half-width of the angular window (rad).
     pub window: f64,
-    scratch: Vec<crate::Neighbour>,
+    cache: Vec<CachedSearch>,
+    /// Identity of the reference the cache was filled from: its length and first point.
+    cached_for: Option<(usize, Point2<f64>)>,
 }
 
 impl MatchingRange {
@@ -80,14 +100,39 @@ impl MatchingRange {
     pub fn new(window: f64) -> Self {
         Self {
             window,
-            scratch: Vec::new(),
+            ..Self::default()
         }
     }
 }
 
 impl CorrespondenceMetric for MatchingRange {
+    fn begin_scan(&mut self, _local: &[Point2<f64>]) {
+        self.cached_for = None;
+    }
+
     fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
         out.clear();
+        // A cache filled from another reference (or before it grew) is dropped.
+        let identity = (
+            reference.len(),
+            reference
+                .points()
+                .first()
+                .copied()
+                .unwrap_or_else(Point2::origin),
+        );
+        if self.cached_for != Some(identity) {
+            for c in &mut self.cache {
+                c.radius = -1.0;
+            }
+            self.cached_for = Some(identity);
+        }
+        if self.cache.len() < query.points.len() {
+            self.cache.resize_with(query.points.len(), || CachedSearch {
+                radius: -1.0,
+                ..CachedSearch::default()
+            });
+        }
         let o = Point2::new(query.pose.x, query.pose.y);
         let cos_window = self.window.min(std::f64::consts::PI).cos();
         for (k, p) in query.points.iter().enumerate() {
@@ -102,9 +147,23 @@ impl CorrespondenceMetric for MatchingRange {
             let reach = query
                 .max_dist
                 .min(r * self.window.min(1.0) + RANGE_RULE_MARGIN);
-            reference.within_radius(p, reach, &mut self.scratch);
+            let search = &mut self.cache[k];
+            // The cached search covers this one when its disc holds the disc of radius reach
+            // about p; it is repeated when p left it or it is more than twice too wide.
+            let covered = dist_sq(&search.center, p).sqrt() + reach + 1e-9 <= search.radius
+                && 2.0 * reach >= search.radius;
+            if !covered {
+                search.center = *p;
+                search.radius = reach + RANGE_RULE_CACHE_SLACK;
+                reference.within_radius(p, search.radius, &mut search.found);
+            }
+            let reach_sq = reach * reach;
             let mut best: Option<(f64, PointId, f64)> = None;
-            for n in &self.scratch {
+            for n in &search.found {
+                let d2 = dist_sq(&n.point, p);
+                if d2 > reach_sq {
+                    continue;
+                }
                 let e = n.point - o;
                 let re = e.norm();
                 // Inside the window: the bearing of e is within ±window of the bearing of d.
@@ -113,7 +172,7 @@ impl CorrespondenceMetric for MatchingRange {
                 }
                 let dr = (re - r).abs();
                 if best.is_none_or(|b| dr < b.0) {
-                    best = Some((dr, n.id, n.dist_sq));
+                    best = Some((dr, n.id, d2));
                 }
             }
             if let Some((_, id, d2)) = best {
