@@ -225,6 +225,12 @@ pub struct Schedule {
 }
 
 impl Schedule {
+    /// A schedule whose gate has already shrunk `level` times.
+    #[must_use]
+    pub fn at(level: u32) -> Self {
+        Self { level, in_stage: 0 }
+    }
+
     /// Records one step; returns true when the iteration has converged (settled at the last
     /// gate). The gate shrinks when the estimate settles or the stage's budget is spent.
     pub fn advance(&mut self, icp: &IcpParams, settled: bool, final_stage: bool) -> bool {

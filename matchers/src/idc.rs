@@ -1,7 +1,7 @@
 //! Iterative Dual Correspondence (Lu & Milios 1997).
 
 use crate::ConfigError;
-use crate::icp::{IcpParams, move_points, positive, residual, trim};
+use crate::icp::{IcpParams, Schedule, move_points, non_negative, positive, residual, trim};
 use crate::lsq::{NormalEquations, align_points};
 use qicp_core::{
     ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix2, Matrix3,
@@ -18,6 +18,28 @@ pub struct IdcParams {
     pub window_start_deg: f64,
     /// … shrinking with the gate down to this (deg). Default 1.
     pub window_end_deg: f64,
+    /// With an odometry prior, the first window is this many of the prior's rotation standard
+    /// deviations instead (within window_end_deg…window_start_deg): Lu & Milios size Bw to the
+    /// rotation error they expect, and a window far wider than odometry's error only lets
+    /// the range rule jump to wrong rotations. 0 always starts at window_start_deg.
+    /// Default 2.
+    pub window_sigmas: f64,
+    /// A stage whose window is still wider than window_end_deg ends once a step moves less
+    /// than this fraction of the gate and turns less than this fraction of the window: the
+    /// two rules never agree to 0.1 mm, and refining a wide stage is wasted work.
+    /// Default 0.02.
+    pub stage_tolerance: f64,
+    /// The last stage also settles when a step moves less than this (m)… Below it the steps
+    /// are the jitter of pairs switching between the overlapping samples of a map.
+    /// Default 0.001.
+    pub settle_translation: f64,
+    /// … and turns less than this (deg). Default 0.06.
+    pub settle_rotation_deg: f64,
+    /// After the iteration, compare the result with the initial guess (points within 5 cm of
+    /// the reference surface, truncated squares); when the guess explains the scan better,
+    /// refine it with the closest-point rule alone and keep whichever explains it best. One
+    /// wrong match must not enter a map that is never forgotten. Default true.
+    pub verify: bool,
 }
 
 impl Default for IdcParams {
@@ -25,6 +47,11 @@ impl Default for IdcParams {
         Self {
             window_start_deg: 15.0,
             window_end_deg: 1.0,
+            window_sigmas: 2.0,
+            stage_tolerance: 0.02,
+            settle_translation: 0.001,
+            settle_rotation_deg: 0.06,
+            verify: true,
         }
     }
 }
@@ -40,7 +67,32 @@ impl IdcParams {
                 "windows must satisfy 0 < window_end_deg ≤ window_start_deg ≤ 90",
             ));
         }
-        Ok(())
+        non_negative("matcher.idc.window_sigmas", self.window_sigmas)?;
+        if !(self.stage_tolerance.is_finite()
+            && self.stage_tolerance > 0.0
+            && self.stage_tolerance < 1.0)
+        {
+            return Err(ConfigError::invalid(
+                "matcher.idc.stage_tolerance",
+                format!("{} must be in (0, 1)", self.stage_tolerance),
+            ));
+        }
+        non_negative("matcher.idc.settle_translation", self.settle_translation)?;
+        non_negative("matcher.idc.settle_rotation_deg", self.settle_rotation_deg)
+    }
+
+    /// The first window (deg): `window_sigmas` standard deviations of the prior's rotation
+    /// when there is a prior, clamped to the configured windows.
+    #[must_use]
+    pub fn first_window_deg(&self, prior: Option<&Matrix3<f64>>) -> f64 {
+        match prior {
+            Some(lambda) if self.window_sigmas > 0.0 && lambda[(2, 2)] > 0.0 => {
+                (self.window_sigmas / lambda[(2, 2)].sqrt())
+                    .to_degrees()
+                    .clamp(self.window_end_deg, self.window_start_deg)
+            }
+            _ => self.window_start_deg,
+        }
     }
 }
 
@@ -107,6 +159,8 @@ pub struct Idc<C = ClosestPoint> {
     cp: Vec<Pair>,
     mr: Vec<Pair>,
     scratch: Vec<f64>,
+    samples: Vec<(f64, f64)>,
+    feet: Vec<(Point2<f64>, Point2<f64>)>,
 }
 
 impl<C: CorrespondenceMetric + Default> Idc<C> {
@@ -157,37 +211,161 @@ impl<C: CorrespondenceMetric> Idc<C> {
     }
 }
 
-impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
-    fn name(&self) -> &'static str {
-        "idc"
-    }
+/// Distance to the reference surface up to which the verification counts a point as
+/// explained (m); farther points cost as much as this.
+const VERIFY_DISTANCE: f64 = 0.05;
 
-    /// The prior (odometry) is fused with each iteration's estimate through the information
-    /// of the closest-point pairs.
-    fn match_with_prior<I: SpatialIndex>(
+/// Cauchy's tuning constant (95 % efficiency on Gaussian residuals).
+const CAUCHY: f64 = 2.385;
+
+/// A robust weighted mean of `(value, weight)` samples: starts from the weighted median and
+/// reweights by Cauchy's function of the residual, scaled by the median absolute deviation
+/// (at least `floor`), so a few wrong pairs cannot pull it far.
+fn robust_mean(samples: &mut [(f64, f64)], scratch: &mut Vec<f64>, floor: f64) -> Option<f64> {
+    let total: f64 = samples.iter().map(|s| s.1).sum();
+    if samples.is_empty() || !(total > 0.0) {
+        return None;
+    }
+    samples.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut acc = 0.0;
+    let mut m = samples[samples.len() - 1].0;
+    for (v, w) in samples.iter() {
+        acc += w;
+        if acc >= 0.5 * total {
+            m = *v;
+            break;
+        }
+    }
+    scratch.clear();
+    scratch.extend(samples.iter().map(|s| (s.0 - m).abs()));
+    let mid = scratch.len() / 2;
+    let mad = *scratch.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let c = CAUCHY * (1.4826 * mad).max(floor);
+    for _ in 0..ROBUST_ITERATIONS {
+        let (mut sum, mut weight) = (0.0, 0.0);
+        for (v, w) in samples.iter() {
+            let e = (v - m) / c;
+            let w = w / (1.0 + e * e);
+            sum += w * v;
+            weight += w;
+        }
+        m = sum / weight;
+    }
+    Some(m)
+}
+
+/// Reweighting rounds of the robust estimates.
+const ROBUST_ITERATIONS: usize = 4;
+/// The robust scale of the range rule's bearing differences never falls below this (rad).
+const ROBUST_ANGLE_FLOOR: f64 = 0.1 * std::f64::consts::PI / 180.0;
+
+impl<C: CorrespondenceMetric> Idc<C> {
+    /// The rotation the matching-range pairs give at `pose` (Lu & Milios Eq. 11): the mean
+    /// bearing difference, weighted by (r·tan β)² and made robust (Cauchy, see
+    /// [`robust_mean`]): in clutter a few grazing-incidence pairs with huge weights used to
+    /// swing it by degrees from one iteration to the next.
+    fn range_rotation<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,
-        scan: &Scan,
-        guess: Pose2,
-        prior: Option<Matrix3<f64>>,
-    ) -> MatchResult {
-        if let Some(why) = self.icp.cannot_match(scan, reference) {
-            return MatchResult::fallback(guess, why);
+        pose: &Pose2,
+    ) -> Option<f64> {
+        let o = Point2::new(pose.x, pose.y);
+        let info = reference.info();
+        self.samples.clear();
+        for p in &self.mr {
+            let b = self.moved[p.scan as usize] - o;
+            let r = b.norm();
+            let a = same_range_point(reference, p.reference, &o, r) - o;
+            let n = info[p.reference as usize].normal;
+            let cos = (a.dot(&n) / a.norm().max(1e-9))
+                .abs()
+                .max(MIN_INCIDENCE_COS);
+            let w = r * r * (1.0 - cos * cos) / (cos * cos);
+            if w > 0.0 {
+                self.samples.push((
+                    qicp_core::normalize_angle(a.y.atan2(a.x) - b.y.atan2(b.x)),
+                    w,
+                ));
+            }
         }
-        let local = scan.points();
-        self.closest.begin_scan(local);
-        let mut pose = guess;
-        let mut converged = false;
-        let mut iterations = 0;
-        let mut schedule = self.icp.schedule();
+        robust_mean(&mut self.samples, &mut self.scratch, ROBUST_ANGLE_FLOOR)
+            .map(|d| pose.theta + d)
+    }
+
+    /// One closest-point step from `pose` with the current pairs: each scan point pairs with
+    /// the foot of its perpendicular on the reference polyline (Lu & Milios pair with the
+    /// closest point on the polyline, not the nearest sample); the rotation is `theta` when
+    /// given (the range rule's), the pairs' own otherwise; the translation is the pairs'
+    /// given that rotation; the result is fused with the odometry prior.
+    fn closest_step<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+        theta: Option<f64>,
+        guess: &Pose2,
+        prior: Option<&Matrix3<f64>>,
+    ) -> Option<Pose2> {
+        self.feet.clear();
+        for p in &self.cp {
+            let b = local[p.scan as usize];
+            let a = surface_foot(reference, p.reference, &pose.transform_point(&b));
+            self.feet.push((a, b));
+        }
+        let by_cp = align_points(self.feet.iter().copied())?;
+        let theta = theta.unwrap_or(by_cp.theta);
+        // Translation of the closest-point rule given that rotation: t = ā − R·b̄.
+        let n = self.feet.len() as f64;
+        let (mut ca, mut cb) = (Point2::origin().coords, Point2::origin().coords);
+        for (a, b) in &self.feet {
+            ca += a.coords;
+            cb += b.coords;
+        }
+        let r = Pose2::new(0.0, 0.0, theta).rotation();
+        let t = ca / n - r * (cb / n);
+        let mut next = Pose2::new(t.x, t.y, theta);
+        if let Some(lambda) = prior {
+            // Fuse with the odometry prior through the information of the pairs: the
+            // directions the scan leaves open (one trunk in view) keep odometry's estimate.
+            let h = self.line_information(reference, local, &next);
+            let d = qicp_core::Vector3::new(
+                guess.x - next.x,
+                guess.y - next.y,
+                qicp_core::normalize_angle(guess.theta - next.theta),
+            );
+            if let Some(step) = (h + lambda).cholesky().map(|c| c.solve(&(lambda * d))) {
+                next = crate::lsq::apply_step(&next, &step);
+            }
+        }
+        Some(next)
+    }
+}
+
+impl<C: CorrespondenceMetric> Idc<C> {
+    /// Iterates both rules from `start` with the gate schedule at `first_level` until the
+    /// estimate settles at the last gate: the estimate, the iterations run and whether it
+    /// settled. `Err` when the first iteration finds too few pairs or the system is singular.
+    #[allow(clippy::too_many_arguments)]
+    fn iterate<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        start: Pose2,
+        guess: &Pose2,
+        prior: Option<&Matrix3<f64>>,
+        first_window_deg: f64,
+        first_level: u32,
+    ) -> Result<(Pose2, u32, bool), Fallback> {
+        let mut pose = start;
+        let mut schedule = Schedule::at(first_level);
+        let last_level = self.icp.last_level().max(1) as f64;
+        let end_deg = self.params.window_end_deg;
         for it in 0..self.icp.max_iterations {
-            iterations = it + 1;
             let gate = self.icp.gate(schedule.level);
             // Lu & Milios: the window Bw shrinks as the estimate converges.
             // The window narrows geometrically with the gate, reaching its end with it.
-            let progress = (schedule.level as f64 / self.icp.last_level().max(1) as f64).min(1.0);
-            let window_deg = self.params.window_start_deg
-                * (self.params.window_end_deg / self.params.window_start_deg).powf(progress);
+            let progress = (f64::from(schedule.level) / last_level).min(1.0);
+            let window_deg = first_window_deg * (end_deg / first_window_deg).powf(progress);
             move_points(&pose, local, &mut self.moved);
             let query = Query {
                 local,
@@ -203,100 +381,128 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
                 self.icp.max_dist_end,
                 &mut self.scratch,
             );
-            // Lu & Milios Sec. 4.2: matching-range rule inside the window ±Bw.
-            self.range_rule.window = window_deg.to_radians();
-            self.range_rule
-                .pair(reference.index(), &query, &mut self.mr);
-            trim(
-                &mut self.mr,
-                self.icp.trim,
-                self.icp.max_dist_end,
-                &mut self.scratch,
-            );
             if self.cp.len() < self.icp.min_correspondences {
                 if it == 0 {
-                    return MatchResult::fallback(
-                        guess,
-                        Fallback::TooFewCorrespondences {
-                            found: self.cp.len(),
-                        },
-                    );
+                    return Err(Fallback::TooFewCorrespondences {
+                        found: self.cp.len(),
+                    });
                 }
-                break;
+                return Ok((pose, it, false));
             }
-            // Lu & Milios pair with the closest point on the reference *polyline*, not the
-            // nearest sample: slide the sample along its surface to the foot of the point.
-            let foot = |p: &Pair| {
-                (
-                    surface_foot(reference, p.reference, &self.moved[p.scan as usize]),
-                    local[p.scan as usize],
-                )
-            };
-            let cp_pairs = self.cp.iter().map(foot);
-            let Some(by_cp) = align_points(cp_pairs.clone()) else {
-                return MatchResult::fallback(guess, Fallback::Degenerate);
-            };
-            // The rotation of the matching-range rule, when it found enough pairs.
-            // Lu & Milios Eq. (11): pairs of equal range differ by a rotation about the sensor.
-            // In least squares each bearing difference counts with (dr/dφ)² = (r·tan β)², β the
-            // incidence angle: where range barely changes with bearing (a wall seen head-on)
-            // equal ranges say little about rotation. The interpolation assumes straight
-            // surfaces, so once the window is at its narrowest the closest-point rule on the
-            // polyline, unbiased on curved trunks and corners too, refines the rotation.
-            let coarse = window_deg > self.params.window_end_deg;
-            let theta = if coarse && self.mr.len() >= self.icp.min_correspondences {
-                let o = Point2::new(pose.x, pose.y);
-                let info = reference.info();
-                let (mut sum, mut weight) = (0.0, 0.0);
-                for p in &self.mr {
-                    let b = self.moved[p.scan as usize] - o;
-                    let r = b.norm();
-                    let a = same_range_point(reference, p.reference, &o, r) - o;
-                    let n = info[p.reference as usize].normal;
-                    let cos = (a.dot(&n) / a.norm().max(1e-9))
-                        .abs()
-                        .max(MIN_INCIDENCE_COS);
-                    let w = r * r * (1.0 - cos * cos) / (cos * cos);
-                    sum += w * qicp_core::normalize_angle(a.y.atan2(a.x) - b.y.atan2(b.x));
-                    weight += w;
-                }
-                if weight > 0.0 {
-                    pose.theta + sum / weight
-                } else {
-                    by_cp.theta
-                }
-            } else {
-                by_cp.theta
-            };
-            // Translation of the closest-point rule given that rotation: t = ā − R·b̄.
-            let n = self.cp.len() as f64;
-            let (mut ca, mut cb) = (Point2::origin().coords, Point2::origin().coords);
-            for (a, b) in cp_pairs {
-                ca += a.coords;
-                cb += b.coords;
-            }
-            let r = Pose2::new(0.0, 0.0, theta).rotation();
-            let t = ca / n - r * (cb / n);
-            let mut next = Pose2::new(t.x, t.y, theta);
-            if let Some(lambda) = &prior {
-                // Fuse with the odometry prior through the information of the pairs: the
-                // directions the scan leaves open (one trunk in view) keep odometry's estimate.
-                let h = self.line_information(reference, local, &next);
-                let d = qicp_core::Vector3::new(
-                    guess.x - next.x,
-                    guess.y - next.y,
-                    qicp_core::normalize_angle(guess.theta - next.theta),
+            // Lu & Milios Sec. 4.2: matching-range rule inside the window ±Bw. Its pairs set
+            // the rotation while the window is still wider than its end value; then the
+            // closest-point rule on the polyline, unbiased on curved trunks and corners too,
+            // refines it (the range rule's interpolation assumes straight surfaces).
+            let coarse = window_deg > end_deg;
+            let mut range_theta = None;
+            if coarse {
+                self.range_rule.window = window_deg.to_radians();
+                self.range_rule
+                    .pair(reference.index(), &query, &mut self.mr);
+                trim(
+                    &mut self.mr,
+                    self.icp.trim,
+                    self.icp.max_dist_end,
+                    &mut self.scratch,
                 );
-                if let Some(step) = (h + lambda).cholesky().map(|c| c.solve(&(lambda * d))) {
-                    next = crate::lsq::apply_step(&next, &step);
+                if self.mr.len() >= self.icp.min_correspondences {
+                    range_theta = self.range_rotation(reference, &pose);
                 }
             }
-            let settled = self.icp.small_step(&pose, &next);
+            let Some(next) = self.closest_step(reference, local, &pose, range_theta, guess, prior)
+            else {
+                return Err(Fallback::Degenerate);
+            };
+            let (moved, turned) = (
+                pose.distance(&next),
+                qicp_core::normalize_angle(pose.theta - next.theta).abs(),
+            );
+            let settled = if coarse {
+                let f = self.params.stage_tolerance;
+                moved < gate * f && turned < window_deg.to_radians() * f
+            } else {
+                self.icp.small_step(&pose, &next)
+                    || (moved < self.params.settle_translation
+                        && turned < self.params.settle_rotation_deg.to_radians())
+            };
             pose = next;
             let final_stage = self.icp.at_last_gate(schedule.level);
             if schedule.advance(&self.icp, settled, final_stage) {
-                converged = true;
-                break;
+                return Ok((pose, it + 1, true));
+            }
+        }
+        Ok((pose, self.icp.max_iterations, false))
+    }
+
+    /// How badly `pose` explains the scan: Σ min(d², D²) over the scan points, d the distance
+    /// from the point to the reference surface through its nearest sample, D
+    /// [`VERIFY_DISTANCE`] (also for points with no sample that near). Lower is better.
+    fn misfit<I: SpatialIndex>(
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+    ) -> f64 {
+        let cap = VERIFY_DISTANCE * VERIFY_DISTANCE;
+        local
+            .iter()
+            .map(|b| {
+                let p = pose.transform_point(b);
+                reference
+                    .index()
+                    .nearest_within(&p, 4.0 * cap)
+                    .map_or(cap, |n| {
+                        (surface_foot(reference, n.id, &p) - p)
+                            .norm_squared()
+                            .min(cap)
+                    })
+            })
+            .sum()
+    }
+}
+
+impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
+    fn name(&self) -> &'static str {
+        "idc"
+    }
+
+    /// The prior (odometry) is fused with each iteration's estimate through the information
+    /// of the closest-point pairs, and sizes the range rule's first window.
+    fn match_with_prior<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan: &Scan,
+        guess: Pose2,
+        prior: Option<Matrix3<f64>>,
+    ) -> MatchResult {
+        if let Some(why) = self.icp.cannot_match(scan, reference) {
+            return MatchResult::fallback(guess, why);
+        }
+        let local = scan.points();
+        self.closest.begin_scan(local);
+        self.range_rule.begin_scan(local);
+        let prior = prior.as_ref();
+        let window = self.params.first_window_deg(prior);
+        let (mut pose, mut iterations, mut converged) =
+            match self.iterate(reference, local, guess, &guess, prior, window, 0) {
+                Ok(found) => found,
+                Err(why) => return MatchResult::fallback(guess, why),
+            };
+        if self.params.verify {
+            // The initial guess explains the scan better than the result: the iteration went
+            // astray (a wide window's range pairs, a local minimum). Refine the guess with the
+            // closest-point rule alone, at the last gate, and keep whichever fits best.
+            let misfit = Self::misfit(reference, local, &pose);
+            if Self::misfit(reference, local, &guess) < misfit {
+                let last = self.icp.last_level();
+                if let Ok((again, more, settled)) =
+                    self.iterate(reference, local, guess, &guess, prior, window, last)
+                {
+                    iterations += more;
+                    if Self::misfit(reference, local, &again) < misfit {
+                        pose = again;
+                        converged = settled;
+                    }
+                }
             }
         }
         // Covariance of the point-to-line least squares (pairs are polyline feet, so only the
@@ -311,7 +517,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         self.closest.pair(reference.index(), &query, &mut self.cp);
         let n = self.cp.len();
         let mut h = self.line_information(reference, local, &pose);
-        if let Some(lambda) = &prior {
+        if let Some(lambda) = prior {
             h += lambda;
         }
         let covariance = h
