@@ -126,10 +126,12 @@ const PREFETCH: usize = 1024;
 ///
 /// Start-up overlaps with the source: while this thread sets up its iceoryx2 ports and waits
 /// for subscribers, a second thread already pulls records (a simulator computes its first
-/// scans), up to [`PREFETCH`] ahead. Once the subscribers are ready, that thread stops and
-/// hands the source back; this thread publishes what it made, then pulls the rest itself, so
-/// the drive does not pay a thread hand-off per record. Order, pacing (`--rate`, counted from
-/// the first scan sent) and back-pressure are unchanged.
+/// scans), up to [`PREFETCH`] ahead. Once the subscribers are ready, this thread publishes
+/// that backlog while the source goes on; when it has caught up, the source thread stops and
+/// hands the source back, and this thread pulls the rest itself, so the drive does not pay a
+/// thread hand-off per record. (Paced by `--rate`, it never catches up: the source thread
+/// then runs to the end.) Order, pacing (counted from the first scan sent) and back-pressure
+/// are unchanged.
 pub fn publish_records(
     records: impl Iterator<Item = Result<Record>> + Send,
     beams: usize,
@@ -156,11 +158,25 @@ pub fn publish_records(
             .context("starting the source thread")?;
         // On an error `rx` is dropped on return: the source stops before the scope joins it.
         let mut publisher = connect(beams, args)?;
-        stop.store(true, Ordering::Release);
         let mut drive = Drive::new(args.rate);
-        // What the source made before it saw `stop`; the loop ends when it has returned.
+        // Publish the backlog while the source keeps producing (a full subscriber buffer
+        // holds this thread up, not the simulator), until this thread has caught up with it.
+        loop {
+            match rx.try_recv() {
+                Ok(record) => {
+                    if !drive.publish(&mut publisher, record?)? {
+                        break;
+                    }
+                }
+                Err(std::sync::mpsc::TryRecvError::Empty) => break,
+                Err(std::sync::mpsc::TryRecvError::Disconnected) => break,
+            }
+        }
+        stop.store(true, Ordering::Release);
+        // What the source made before it saw `stop` (at most the record in progress); the
+        // loop ends when it has returned.
         for record in rx {
-            if !drive.publish(&mut publisher, record?)? {
+            if drive.interrupted || !drive.publish(&mut publisher, record?)? {
                 break;
             }
         }
