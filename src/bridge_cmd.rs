@@ -730,7 +730,15 @@ fn iceoryx2_run(ranges: &[f64], messages: usize, paced: bool, spin: bool) -> Res
         let mut received = 0;
         while received < messages {
             received += subscriber.poll(&mut on_scan)?;
-            anyhow::ensure!(Instant::now() < deadline, "spinning bench stalled");
+            if publisher.is_finished() && received < messages {
+                // It failed (or sent less): stop spinning; its error is reported below.
+                received += subscriber.poll(&mut on_scan)?;
+                break;
+            }
+            anyhow::ensure!(
+                Instant::now() < deadline,
+                "spinning bench stalled: {received} of {messages} messages after 60 s"
+            );
             std::hint::spin_loop();
         }
         StreamReport {
