@@ -5,7 +5,10 @@
 //! - `qicp match --subscribe [--matcher KIND] [--out DIR]`: match the scans of whoever
 //!   publishes, publish the poses, write the outputs of `qicp match`;
 //! - `qicp bench bridge [--json]`: one-way latency and throughput, iceoryx2 against a
-//!   Unix-domain socket carrying the same bytes.
+//!   Unix-domain socket carrying the same bytes;
+//! - `qicp bench bridge-park [CONFIG] [--runs N] [--json]`: wall and CPU time of a whole drive
+//!   simulated and matched in one process, against `qicp sim --publish` feeding
+//!   `qicp match --subscribe`.
 //!
 //! Services: `<prefix>/scan` and `<prefix>/pose` (`--service-prefix`, default `qicp`).
 
