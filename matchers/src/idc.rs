@@ -35,10 +35,11 @@ pub struct IdcParams {
     pub settle_translation: f64,
     /// … and turns less than this (deg). Default 0.06.
     pub settle_rotation_deg: f64,
-    /// After the iteration, compare the result with the initial guess (points within 5 cm of
-    /// the reference surface, truncated squares); when the guess explains the scan better,
-    /// refine it with the closest-point rule alone and keep whichever explains it best. One
-    /// wrong match must not enter a map that is never forgotten. Default true.
+    /// Check the initial guess against the scan (squared distances of the points to the
+    /// reference surface, truncated at 5 cm): one that explains it very badly is not used as a
+    /// prior; after the iteration, when the guess explains the scan better than the result,
+    /// it is refined with the closest-point rule alone and whichever explains the scan best
+    /// is kept. One wrong match must not enter a map that is never forgotten. Default true.
     pub verify: bool,
 }
 
@@ -214,6 +215,10 @@ impl<C: CorrespondenceMetric> Idc<C> {
 /// Distance to the reference surface up to which the verification counts a point as
 /// explained (m); farther points cost as much as this.
 const VERIFY_DISTANCE: f64 = 0.05;
+/// An initial guess whose misfit exceeds this fraction of the largest possible (every point
+/// unexplained) is not trusted as a prior. On the Intel log the results' misfits have median
+/// 0.07 and 99th percentile 0.27 of it.
+const SUSPECT_GUESS: f64 = 0.4;
 
 /// Cauchy's tuning constant (95 % efficiency on Gaussian residuals).
 const CAUCHY: f64 = 2.385;
@@ -480,7 +485,13 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         let local = scan.points();
         self.closest.begin_scan(local);
         self.range_rule.begin_scan(local);
-        let prior = prior.as_ref();
+        // Odometry that explains the scan this badly is wrong (the Intel log has records whose
+        // timestamps put them out of order): match without its prior, from a full window.
+        let guess_misfit = Self::misfit(reference, local, &guess);
+        let suspect = self.params.verify
+            && guess_misfit
+                > SUSPECT_GUESS * local.len() as f64 * VERIFY_DISTANCE * VERIFY_DISTANCE;
+        let prior = if suspect { None } else { prior.as_ref() };
         let window = self.params.first_window_deg(prior);
         let (mut pose, mut iterations, mut converged) =
             match self.iterate(reference, local, guess, &guess, prior, window, 0) {
@@ -492,7 +503,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             // astray (a wide window's range pairs, a local minimum). Refine the guess with the
             // closest-point rule alone, at the last gate, and keep whichever fits best.
             let misfit = Self::misfit(reference, local, &pose);
-            if Self::misfit(reference, local, &guess) < misfit {
+            if guess_misfit < misfit {
                 let last = self.icp.last_level();
                 if let Ok((again, more, settled)) =
                     self.iterate(reference, local, guess, &guess, prior, window, last)
