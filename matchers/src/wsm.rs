@@ -252,6 +252,16 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
             max_dist: self.icp.max_dist_end,
         };
         self.metric.pair(reference.index(), &query, &mut self.pairs);
+        if self.pairs.len() < self.icp.min_correspondences {
+            // The estimate lost its support on the way (pairs fell out of the shrinking
+            // gate): it and its near-singular covariance would be noise.
+            return MatchResult::fallback(
+                guess,
+                Fallback::TooFewCorrespondences {
+                    found: self.pairs.len(),
+                },
+            );
+        }
         // The sliding term stays: without it a featureless corridor would claim to fix the
         // pose along its axis to the sample spacing (tests/wsm_covariance.rs).
         let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
