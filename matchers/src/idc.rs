@@ -228,7 +228,7 @@ const CAUCHY: f64 = 2.385;
 /// (at least `floor`), so a few wrong pairs cannot pull it far.
 fn robust_mean(samples: &mut [(f64, f64)], scratch: &mut Vec<f64>, floor: f64) -> Option<f64> {
     let total: f64 = samples.iter().map(|s| s.1).sum();
-    if samples.is_empty() || !(total > 0.0) {
+    if samples.is_empty() || total.is_nan() || total <= 0.0 {
         return None;
     }
     samples.sort_by(|a, b| a.0.total_cmp(&b.0));
