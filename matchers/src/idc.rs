@@ -527,6 +527,11 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         };
         self.closest.pair(reference.index(), &query, &mut self.cp);
         let n = self.cp.len();
+        if n < self.icp.min_correspondences {
+            // The estimate lost its support on the way (pairs fell out of the shrinking
+            // gate): it and its near-singular covariance would be noise.
+            return MatchResult::fallback(guess, Fallback::TooFewCorrespondences { found: n });
+        }
         let mut h = self.line_information(reference, local, &pose);
         if let Some(lambda) = prior {
             h += lambda;
