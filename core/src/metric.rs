@@ -2,7 +2,7 @@
 //! expressed as queries on any [`SpatialIndex`].
 
 use crate::Pose2;
-use crate::index::{PointId, SpatialIndex, dist_sq};
+use crate::index::{Neighbour, PointId, SpatialIndex, dist_sq};
 use nalgebra::Point2;
 
 /// A scan point paired with a reference point.
@@ -75,6 +75,109 @@ struct CachedSearch {
     found: Vec<crate::Neighbour>,
 }
 
+/// Identity of a reference for the caches: its length and first point. The caches are kept
+/// between the iterations of one scan, while the reference does not change.
+fn reference_identity<I: SpatialIndex>(reference: &I) -> (usize, Point2<f64>) {
+    (
+        reference.len(),
+        reference
+            .points()
+            .first()
+            .copied()
+            .unwrap_or_else(Point2::origin),
+    )
+}
+
+/// Nearest-neighbour searches cached between the iterations of one scan, one entry per scan
+/// point. A miss asks the index for the nearest point and then keeps every point within that
+/// distance plus [`NearestCache::SLACK`]; while the scan point stays inside that disc, the
+/// answer is found among the kept points alone, with the same distance as a fresh search
+/// (any point nearer than the kept answer lies inside the disc). Late iterations move the
+/// points by millimetres, so most of their queries become a scan of a dozen points.
+#[derive(Debug, Clone, Default)]
+struct NearestCache {
+    entries: Vec<CachedSearch>,
+    cached_for: Option<(usize, Point2<f64>)>,
+}
+
+impl NearestCache {
+    /// How far a point may move and still be answered from its entry (m).
+    const SLACK: f64 = 0.05;
+    /// Neighbourhoods wider than this are not kept (m): far from everything, a point's
+    /// disc would hold too many points to be worth scanning.
+    const MAX_RADIUS: f64 = 0.3;
+
+    /// Forgets every entry.
+    fn reset(&mut self) {
+        self.cached_for = None;
+    }
+
+    /// Prepares for `n` scan points searched in `reference`; entries from another reference
+    /// are dropped.
+    fn prepare<I: SpatialIndex>(&mut self, reference: &I, n: usize) {
+        let identity = reference_identity(reference);
+        if self.cached_for != Some(identity) {
+            for e in &mut self.entries {
+                e.radius = -1.0;
+            }
+            self.cached_for = Some(identity);
+        }
+        if self.entries.len() < n {
+            self.entries.resize_with(n, || CachedSearch {
+                radius: -1.0,
+                ..CachedSearch::default()
+            });
+        }
+    }
+
+    /// [`SpatialIndex::nearest_within`] for scan point `k` at `p` (call [`prepare`] first).
+    ///
+    /// [`prepare`]: Self::prepare
+    fn nearest_within<I: SpatialIndex>(
+        &mut self,
+        reference: &I,
+        k: usize,
+        p: &Point2<f64>,
+        max_dist_sq: f64,
+    ) -> Option<Neighbour> {
+        let entry = &mut self.entries[k];
+        if entry.radius >= 0.0 {
+            // Every reference point within `inner` of p is in the entry.
+            let inner = entry.radius - dist_sq(&entry.center, p).sqrt();
+            if inner > 0.0 {
+                // A hair of margin so rounding never claims a point the disc may not hold.
+                let inner_sq = inner * inner * (1.0 - 1e-9);
+                let mut best: Option<Neighbour> = None;
+                for n in &entry.found {
+                    let d = dist_sq(&n.point, p);
+                    if d <= max_dist_sq && best.is_none_or(|b| d < b.dist_sq) {
+                        best = Some(Neighbour {
+                            id: n.id,
+                            point: n.point,
+                            dist_sq: d,
+                        });
+                    }
+                }
+                match best {
+                    Some(b) if b.dist_sq <= inner_sq => return Some(b),
+                    None if max_dist_sq <= inner_sq => return None,
+                    _ => {}
+                }
+            }
+        }
+        let nearest = reference.nearest_within(p, max_dist_sq);
+        let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
+        if reach <= Self::MAX_RADIUS {
+            entry.center = *p;
+            entry.radius = reach + Self::SLACK;
+            reference.within_radius(p, entry.radius, &mut entry.found);
+        } else {
+            entry.radius = -1.0;
+        }
+        nearest
+    }
+}
+
 /// IDC's matching-range rule (Lu & Milios 1997, Sec. 4.2): in polar coordinates about the
 /// sensor, a scan point at (r, φ) pairs with the reference point inside the angular window
 /// φ ± `window` whose range is closest to r. Like every pair it must lie within the outlier
@@ -113,14 +216,7 @@ impl CorrespondenceMetric for MatchingRange {
     fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
         out.clear();
         // A cache filled from another reference (or before it grew) is dropped.
-        let identity = (
-            reference.len(),
-            reference
-                .points()
-                .first()
-                .copied()
-                .unwrap_or_else(Point2::origin),
-        );
+        let identity = reference_identity(reference);
         if self.cached_for != Some(identity) {
             for c in &mut self.cache {
                 c.radius = -1.0;
@@ -149,23 +245,37 @@ impl CorrespondenceMetric for MatchingRange {
                 .min(r * self.window.min(1.0) + RANGE_RULE_MARGIN);
             let search = &mut self.cache[k];
             // The cached search covers this one when its disc holds the disc of radius reach
-            // about p; it is repeated when p left it or it is more than twice too wide.
-            let covered = dist_sq(&search.center, p).sqrt() + reach + 1e-9 <= search.radius
-                && 2.0 * reach >= search.radius;
-            if !covered {
+            // about p; it is repeated when p left it. When it is more than twice too wide
+            // (the window shrank) it is cut down to the smaller disc about the same centre,
+            // which still holds every point within reach of p (found points carry their
+            // squared distance to the centre).
+            let off_centre = dist_sq(&search.center, p).sqrt();
+            if off_centre + reach + 1e-9 > search.radius {
                 search.center = *p;
                 search.radius = reach + RANGE_RULE_CACHE_SLACK;
                 reference.within_radius(p, search.radius, &mut search.found);
+            } else if 2.0 * reach < search.radius {
+                search.radius = (off_centre + reach + RANGE_RULE_CACHE_SLACK).min(search.radius);
+                let keep = search.radius * search.radius;
+                search.found.retain(|n| n.dist_sq <= keep);
             }
             let reach_sq = reach * reach;
             let mut best: Option<(f64, PointId, f64)> = None;
+            // Ranges that could still beat the best |Δr|, as squares with a little slack so
+            // the exact test below decides every close call: most candidates are dropped
+            // here without a square root.
+            let (mut lo_sq, mut hi_sq) = (-1.0, f64::INFINITY);
             for n in &search.found {
                 let d2 = dist_sq(&n.point, p);
                 if d2 > reach_sq {
                     continue;
                 }
                 let e = n.point - o;
-                let re = e.norm();
+                let re_sq = e.norm_squared();
+                if re_sq <= lo_sq || re_sq >= hi_sq {
+                    continue;
+                }
+                let re = re_sq.sqrt();
                 // Inside the window: the bearing of e is within ±window of the bearing of d.
                 if re * cos_window > e.dot(&u) {
                     continue;
@@ -173,6 +283,13 @@ impl CorrespondenceMetric for MatchingRange {
                 let dr = (re - r).abs();
                 if best.is_none_or(|b| dr < b.0) {
                     best = Some((dr, n.id, d2));
+                    // |re − r| < dr ⇔ (r − dr)² < re² < (r + dr)² for re ≥ 0.
+                    lo_sq = if dr < r {
+                        (r - dr) * (r - dr) * (1.0 - 1e-9)
+                    } else {
+                        -1.0
+                    };
+                    hi_sq = (r + dr) * (r + dr) * (1.0 + 1e-9);
                 }
             }
             if let Some((_, id, d2)) = best {
@@ -197,6 +314,10 @@ impl CorrespondenceMetric for MatchingRange {
 pub struct MutualNearest<S> {
     scan_index: S,
     closest: Vec<Pair>,
+    /// Searches in the reference, per scan point.
+    in_reference: NearestCache,
+    /// Searches in the scan index, per scan point (for that point's reference partner).
+    in_scan: NearestCache,
 }
 
 impl<S> MutualNearest<S> {
@@ -212,15 +333,19 @@ impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
             // Scan points are finite by construction; a refused one simply cannot pair.
             let _ = self.scan_index.insert(*p);
         }
+        self.in_reference.reset();
+        self.in_scan.reset();
     }
 
     fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
         out.clear();
         self.closest.clear();
         let limit = query.max_dist * query.max_dist;
+        self.in_reference.prepare(reference, query.points.len());
+        self.in_scan.prepare(&self.scan_index, query.points.len());
         for (k, p) in query.points.iter().enumerate() {
             // cA = nearest neighbour of p in Qt
-            let Some(ca) = reference.nearest_within(p, limit) else {
+            let Some(ca) = self.in_reference.nearest_within(reference, k, p, limit) else {
                 continue;
             };
             let pair = Pair {
@@ -231,7 +356,10 @@ impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
             self.closest.push(pair);
             // cB = nearest neighbour of cA in Qscan (taken in the scan frame)
             let ca_local = query.pose.inverse_transform_point(&ca.point);
-            let Some(cb) = self.scan_index.nearest(&ca_local) else {
+            let Some(cb) =
+                self.in_scan
+                    .nearest_within(&self.scan_index, k, &ca_local, f64::INFINITY)
+            else {
                 continue;
             };
             // if cB = p: a tie at the same distance counts as p too

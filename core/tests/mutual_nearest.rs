@@ -32,6 +32,21 @@ fn brute_mutual(map: &[Point2<f64>], scan_ref: &[Point2<f64>], max_dist: f64) ->
     out
 }
 
+/// 181 points of `map` within 8 m of `pose` (all when fewer), moved by up to 2 cm and taken
+/// in the frame of `pose`.
+fn scan_near(map: &[Point2<f64>], pose: &Pose2, seed: u64) -> Vec<Point2<f64>> {
+    let mut r = SplitMix::new(seed);
+    let o = Point2::new(pose.x, pose.y);
+    let seen: Vec<&Point2<f64>> = map.iter().filter(|m| dist_sq(m, &o) < 64.0).collect();
+    (0..181.min(seen.len()))
+        .map(|_| {
+            let m = seen[(r.next_u64() % seen.len() as u64) as usize];
+            let noisy = Point2::new(m.x + r.range(-0.02, 0.02), m.y + r.range(-0.02, 0.02));
+            pose.inverse_transform_point(&noisy)
+        })
+        .collect()
+}
+
 fn check<M: SpatialIndex + Default, S: SpatialIndex + Default>() {
     let map_points = laser_scans(20_000, 11);
     let mut map = M::default();
@@ -39,31 +54,77 @@ fn check<M: SpatialIndex + Default, S: SpatialIndex + Default>() {
         map.insert(*p).unwrap();
     }
     let mut r = SplitMix::new(5);
+    let mut compared = 0;
     for trial in 0..20 {
-        // A scan in its own frame, and the estimate that moves it into the map frame.
-        let local: Vec<Point2<f64>> = laser_scans(181, 100 + trial)
-            .iter()
-            .map(|p| Point2::new(p.x * 0.5, p.y * 0.5))
-            .collect();
-        let pose = Pose2::new(r.range(-1.0, 1.0), r.range(-1.0, 1.0), r.range(-0.2, 0.2));
-        let moved: Vec<Point2<f64>> = local.iter().map(|p| pose * *p).collect();
+        // A scan of map points near a pose, with centimetres of noise, in its own frame.
+        let mut pose = Pose2::new(r.range(-15.0, 15.0), r.range(-5.0, 5.0), r.range(-3.0, 3.0));
+        let local = scan_near(&map_points, &pose, 100 + trial);
         let mut metric = MutualNearest::<S>::default();
         metric.begin_scan(&local);
         let mut pairs: Vec<Pair> = Vec::new();
-        let query = Query {
-            local: &local,
-            points: &moved,
-            pose,
-            max_dist: 0.5,
-        };
-        metric.pair(&map, &query, &mut pairs);
-        let want = brute_mutual(&map_points, &moved, 0.5);
-        if want.len() < MutualNearest::<S>::MIN_PAIRS {
-            continue; // the sparse-scene guard hands back closest pairs instead
+        // The estimate wanders as an iteration moves it, with the gate shrinking: the searches
+        // kept between iterations must give what fresh ones give.
+        for it in 0..12 {
+            let step = if it % 5 == 4 { 0.2 } else { 0.005 };
+            pose = pose
+                * Pose2::new(
+                    r.range(-step, step),
+                    r.range(-step, step),
+                    r.range(-step, step),
+                );
+            let max_dist = [0.5, 0.25, 0.1][it / 4];
+            let moved: Vec<Point2<f64>> = local.iter().map(|p| pose * *p).collect();
+            let query = Query {
+                local: &local,
+                points: &moved,
+                pose,
+                max_dist,
+            };
+            metric.pair(&map, &query, &mut pairs);
+            let want = brute_mutual(&map_points, &moved, max_dist);
+            if want.len() < MutualNearest::<S>::MIN_PAIRS {
+                continue; // the sparse-scene guard hands back closest pairs instead
+            }
+            let got: Vec<(u32, f64)> = pairs.iter().map(|p| (p.scan, p.dist_sq)).collect();
+            assert_eq!(got, want, "trial {trial}, iteration {it}");
+            compared += got.len();
         }
-        let got: Vec<(u32, f64)> = pairs.iter().map(|p| (p.scan, p.dist_sq)).collect();
-        assert_eq!(got, want, "trial {trial}");
     }
+    assert!(compared > 2_000, "only {compared} pairs compared");
+}
+
+/// A metric that searched one map and is then asked about another (no new scan in between)
+/// answers from the new map, not from what it kept of the old one.
+fn check_new_reference<M: SpatialIndex + Default>() {
+    let first: Vec<Point2<f64>> = laser_scans(5_000, 21);
+    let second: Vec<Point2<f64>> = first.iter().map(|p| Point2::new(p.x + 0.03, p.y)).collect();
+    let pose = Pose2::new(0.2, -0.1, 0.05);
+    let local = scan_near(&first, &pose, 22);
+    let moved: Vec<Point2<f64>> = local.iter().map(|p| pose * *p).collect();
+    let query = Query {
+        local: &local,
+        points: &moved,
+        pose,
+        max_dist: 0.5,
+    };
+    let mut metric = MutualNearest::<M>::default();
+    metric.begin_scan(&local);
+    let mut pairs: Vec<Pair> = Vec::new();
+    for points in [&first, &second] {
+        let mut map = M::default();
+        for p in points.iter() {
+            map.insert(*p).unwrap();
+        }
+        metric.pair(&map, &query, &mut pairs);
+        let got: Vec<(u32, f64)> = pairs.iter().map(|p| (p.scan, p.dist_sq)).collect();
+        assert_eq!(got, brute_mutual(points, &moved, 0.5));
+    }
+}
+
+#[test]
+fn a_new_reference_is_searched_afresh() {
+    check_new_reference::<QuadTree>();
+    check_new_reference::<KdTree>();
 }
 
 #[test]
