@@ -24,6 +24,12 @@ pub struct IdcParams {
     /// the range rule jump to wrong rotations. 0 always starts at window_start_deg.
     /// Default 2.
     pub window_sigmas: f64,
+    /// With an odometry prior, the first gate is the narrowest of the schedule that still
+    /// holds this many of the prior's translation standard deviations (yet at least one
+    /// stage with a window wider than window_end_deg runs): the wide gates of the schedule
+    /// exist for large initial errors, and odometry says how large they can be. 0 always
+    /// starts at matcher.icp.max_dist_start. Default 5.
+    pub gate_sigmas: f64,
     /// A stage whose window is still wider than window_end_deg ends once a step moves less
     /// than this fraction of the gate and turns less than this fraction of the window: the
     /// two rules never agree to 0.1 mm, and refining a wide stage is wasted work.
@@ -49,6 +55,7 @@ impl Default for IdcParams {
             window_start_deg: 15.0,
             window_end_deg: 1.0,
             window_sigmas: 2.0,
+            gate_sigmas: 5.0,
             stage_tolerance: 0.02,
             settle_translation: 0.001,
             settle_rotation_deg: 0.06,
@@ -69,6 +76,7 @@ impl IdcParams {
             ));
         }
         non_negative("matcher.idc.window_sigmas", self.window_sigmas)?;
+        non_negative("matcher.idc.gate_sigmas", self.gate_sigmas)?;
         if !(self.stage_tolerance.is_finite()
             && self.stage_tolerance > 0.0
             && self.stage_tolerance < 1.0)
@@ -94,6 +102,25 @@ impl IdcParams {
             }
             _ => self.window_start_deg,
         }
+    }
+
+    /// The level of the gate schedule to start at: with a prior, the last one whose gate
+    /// still holds `gate_sigmas` of its translation standard deviations, at most one before
+    /// the last level; 0 otherwise.
+    #[must_use]
+    pub fn first_level(&self, icp: &IcpParams, prior: Option<&Matrix3<f64>>) -> u32 {
+        let Some(lambda) = prior else { return 0 };
+        let information = lambda[(0, 0)].min(lambda[(1, 1)]);
+        if self.gate_sigmas == 0.0 || information <= 0.0 {
+            return 0;
+        }
+        let needed = self.gate_sigmas / information.sqrt();
+        let last = icp.last_level();
+        let mut level = 0;
+        while level + 1 < last && icp.gate(level + 1) >= needed {
+            level += 1;
+        }
+        level
     }
 }
 
@@ -363,13 +390,19 @@ impl<C: CorrespondenceMetric> Idc<C> {
     ) -> Result<(Pose2, u32, bool), Fallback> {
         let mut pose = start;
         let mut schedule = Schedule::at(first_level);
-        let last_level = self.icp.last_level().max(1) as f64;
+        let last_level = self.icp.last_level();
         let end_deg = self.params.window_end_deg;
         for it in 0..self.icp.max_iterations {
             let gate = self.icp.gate(schedule.level);
             // Lu & Milios: the window Bw shrinks as the estimate converges.
-            // The window narrows geometrically with the gate, reaching its end with it.
-            let progress = (f64::from(schedule.level) / last_level).min(1.0);
+            // The window narrows geometrically with the gate, from the first stage run to
+            // the last gate.
+            let progress = if first_level >= last_level {
+                1.0
+            } else {
+                (f64::from(schedule.level - first_level) / f64::from(last_level - first_level))
+                    .min(1.0)
+            };
             let window_deg = first_window_deg * (end_deg / first_window_deg).powf(progress);
             move_points(&pose, local, &mut self.moved);
             let query = Query {
@@ -493,8 +526,9 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
                 > SUSPECT_GUESS * local.len() as f64 * VERIFY_DISTANCE * VERIFY_DISTANCE;
         let prior = if suspect { None } else { prior.as_ref() };
         let window = self.params.first_window_deg(prior);
+        let first_level = self.params.first_level(&self.icp, prior);
         let (mut pose, mut iterations, mut converged) =
-            match self.iterate(reference, local, guess, &guess, prior, window, 0) {
+            match self.iterate(reference, local, guess, &guess, prior, window, first_level) {
                 Ok(found) => found,
                 Err(why) => return MatchResult::fallback(guess, why),
             };

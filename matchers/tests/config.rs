@@ -98,3 +98,43 @@ fn sections_the_kind_does_not_use_are_refused() {
     let e = err("[matcher]\nkind = \"q-wsm\"\n[matcher.idc]\nwindow_start_deg = 10.0\n");
     assert!(e.contains("matcher.idc"), "{e}");
 }
+
+#[test]
+fn idc_values_name_the_key() {
+    for (section, key) in [
+        (
+            "[matcher.idc]\ngate_sigmas = -1.0",
+            "matcher.idc.gate_sigmas",
+        ),
+        (
+            "[matcher.idc]\nwindow_sigmas = nan",
+            "matcher.idc.window_sigmas",
+        ),
+    ] {
+        let text = format!("[matcher]\nkind = \"q-idc\"\n{section}\n");
+        let e = MatcherConfig::from_toml(&text).expect_err(section);
+        assert!(e.to_string().contains(key), "{section}: {e}");
+    }
+}
+
+/// IDC's first gate follows the odometry prior: a tight prior skips the wide gates (but keeps
+/// one stage before the last, where the range rule runs), a loose one or none starts wide.
+#[test]
+fn idc_first_gate_follows_the_prior() {
+    use qicp_core::Matrix3;
+    use qicp_matchers::{IcpParams, IdcParams};
+    let icp = IcpParams::default(); // gates 1.0, 0.5, 0.25, 0.2
+    let idc = IdcParams::default(); // 5 σ
+    let information =
+        |sigma: f64| Matrix3::from_diagonal(&[1.0, 1.0, 1.0].into()) / (sigma * sigma);
+    assert_eq!(icp.last_level(), 3);
+    assert_eq!(idc.first_level(&icp, None), 0);
+    assert_eq!(idc.first_level(&icp, Some(&information(0.5))), 0);
+    assert_eq!(idc.first_level(&icp, Some(&information(0.09))), 1); // 0.45 m ≤ 0.5 m
+    assert_eq!(idc.first_level(&icp, Some(&information(0.01))), 2); // never the last level
+    let off = IdcParams {
+        gate_sigmas: 0.0,
+        ..idc
+    };
+    assert_eq!(off.first_level(&icp, Some(&information(0.01))), 0);
+}
