@@ -427,9 +427,12 @@ fn slow_subscriber_in_drop_oldest_mode_counts_what_it_lost() {
     assert_eq!(s["bridge"]["end"], "end_of_stream");
     let received = bridge_u64(&s, "received");
     let missing = bridge_u64(&s, "missing");
+    // Scans dropped from the full buffer before the subscriber's first read are counted as
+    // missed before it joined (it cannot tell the two apart; see bridge/README.md).
+    let before_first = bridge_u64(&s, "missed_before_join");
     assert!(missing > 0 && bridge_u64(&s, "gap_events") > 0, "{s}");
     assert_eq!(
-        received + missing,
+        received + missing + before_first,
         80,
         "every scan received or counted lost: {s}"
     );
