@@ -180,9 +180,10 @@ impl NearestCache {
 
 /// IDC's matching-range rule (Lu & Milios 1997, Sec. 4.2): in polar coordinates about the
 /// sensor, a scan point at (r, φ) pairs with the reference point inside the angular window
-/// φ ± `window` whose range is closest to r. Like every pair it must lie within the outlier
-/// gate `max_dist` of the point: in a symmetric corridor the opposite wall has the same range
-/// inside a wide window.
+/// φ ± `window` whose range is closest to r; of candidates with the same |Δr| the one with the
+/// lowest [`PointId`] wins, so the pairs do not depend on the index's search order. Like every
+/// pair it must lie within the outlier gate `max_dist` of the point: in a symmetric corridor
+/// the opposite wall has the same range inside a wide window.
 ///
 /// The candidates of each scan point come from a radius search that is kept between calls of
 /// one scan (see [`begin_scan`](CorrespondenceMetric::begin_scan)): while the point has moved
@@ -281,7 +282,9 @@ impl CorrespondenceMetric for MatchingRange {
                     continue;
                 }
                 let dr = (re - r).abs();
-                if best.is_none_or(|b| dr < b.0) {
+                // Equal |Δr| goes to the lowest id, so every index pairs alike: logged ranges
+                // are quantized (1 cm in CARMEN logs) and exact ties are common.
+                if best.is_none_or(|b| dr < b.0 || (dr == b.0 && n.id < b.1)) {
                     best = Some((dr, n.id, d2));
                     // |re − r| < dr ⇔ (r − dr)² < re² < (r + dr)² for re ≥ 0.
                     lo_sq = if dr < r {

@@ -10,14 +10,15 @@ use qicp_core::{
 };
 
 /// The rule by brute force: inside the window and within the reach of the point, the reference
-/// point whose range from the sensor is closest to the point's. (scan index, dist², |Δr|).
+/// point whose range from the sensor is closest to the point's, the lowest id on equal |Δr|.
+/// (scan index, reference id, |Δr|).
 fn brute_range_rule(
     map: &[Point2<f64>],
     points: &[Point2<f64>],
     pose: &Pose2,
     window: f64,
     max_dist: f64,
-) -> Vec<(u32, f64, f64)> {
+) -> Vec<(u32, u32, f64)> {
     let o = Point2::new(pose.x, pose.y);
     let mut out = Vec::new();
     for (k, p) in points.iter().enumerate() {
@@ -29,16 +30,17 @@ fn brute_range_rule(
         let reach = max_dist.min(r * window.min(1.0) + 0.1);
         let best = map
             .iter()
-            .filter(|m| dist_sq(m, p) <= reach * reach)
-            .filter(|m| {
+            .zip(0u32..)
+            .filter(|(m, _)| dist_sq(m, p) <= reach * reach)
+            .filter(|(m, _)| {
                 // The bearing of m is within ±window of the point's: cos ≥ cos(window).
                 let e = *m - o;
                 e.dot(&(d / r)) >= e.norm() * window.min(std::f64::consts::PI).cos()
             })
-            .map(|m| ((m - o).norm() - r).abs())
-            .fold(None, |b: Option<f64>, dr| Some(b.map_or(dr, |b| b.min(dr))));
-        if let Some(dr) = best {
-            out.push((k as u32, f64::NAN, dr));
+            .map(|(m, id)| (((m - o).norm() - r).abs(), id))
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        if let Some((dr, id)) = best {
+            out.push((k as u32, id, dr));
         }
     }
     out
@@ -119,6 +121,11 @@ fn check<I: SpatialIndex + Default>() {
                     p.scan,
                     w.2
                 );
+                assert_eq!(
+                    p.reference, w.1,
+                    "scan {scan}, iteration {it}, point {}: paired with another point",
+                    p.scan
+                );
                 checked += 1;
             }
         }
@@ -165,4 +172,82 @@ fn a_new_reference_drops_the_cache() {
     rule.pair(&b, &query, &mut pairs);
     assert_eq!(pairs.len(), 1);
     assert_eq!(pairs[0].reference, 1);
+}
+
+/// Logged ranges are quantized, so several reference points can differ from a scan point's
+/// range by exactly the same amount. The rule then takes the lowest id whatever order the index
+/// finds them in, so the quad tree, the kd-tree and brute force pair alike.
+fn ties_go_to_the_lowest_id<I: SpatialIndex + Default>() {
+    // Points at exactly 65/8 m from the origin (integer solutions of x² + y² = 65², scaled by
+    // 1/8 so every square and the root are exact), 5–8° apart.
+    let ring: Vec<Point2<f64>> = [
+        (16.0, 63.0),
+        (25.0, 60.0),
+        (33.0, 56.0),
+        (39.0, 52.0),
+        (52.0, 39.0),
+        (56.0, 33.0),
+        (60.0, 25.0),
+        (63.0, 16.0),
+    ]
+    .iter()
+    .map(|&(x, y)| Point2::new(x / 8.0, y / 8.0))
+    .collect();
+    let mut rng = SplitMix::new(7);
+    let mut ties = 0;
+    for _ in 0..20 {
+        // Each round inserts the ring in another order among other points, so ids and the
+        // indexes' search orders are shuffled against each other.
+        let mut map_points: Vec<Point2<f64>> = laser_scans(2_000, 3)
+            .into_iter()
+            .map(|p| Point2::new(p.x + 40.0, p.y))
+            .collect();
+        for p in &ring {
+            let at = (rng.next_u64() % (map_points.len() as u64 + 1)) as usize;
+            map_points.insert(at, *p);
+        }
+        let mut map = I::default();
+        for p in &map_points {
+            map.insert(*p).unwrap();
+        }
+        let pose = Pose2::IDENTITY;
+        let local: Vec<Point2<f64>> = (0..30)
+            .map(|_| {
+                let bearing = rng.range(20f64.to_radians(), 70f64.to_radians());
+                let r = 65.0 / 8.0 + rng.range(-0.2, 0.2);
+                Point2::new(r * bearing.cos(), r * bearing.sin())
+            })
+            .collect();
+        let window = 25f64.to_radians();
+        let mut rule = MatchingRange::new(window);
+        rule.begin_scan(&local);
+        let query = Query {
+            local: &local,
+            points: &local,
+            pose,
+            max_dist: 2.0,
+        };
+        let mut pairs = Vec::new();
+        rule.pair(&map, &query, &mut pairs);
+        let want = brute_range_rule(&map_points, &local, &pose, window, 2.0);
+        let got: Vec<(u32, u32)> = pairs.iter().map(|p| (p.scan, p.reference)).collect();
+        let expected: Vec<(u32, u32)> = want.iter().map(|w| (w.0, w.1)).collect();
+        assert_eq!(got, expected);
+        // The test means something only if ring points tied for the scan points.
+        ties += want
+            .iter()
+            .filter(|w| ring.contains(&map_points[w.1 as usize]))
+            .count();
+    }
+    assert!(ties > 300, "only {ties} pairs went to the ring");
+}
+
+#[test]
+fn ties_go_to_the_lowest_id_quadtree() {
+    ties_go_to_the_lowest_id::<QuadTree>();
+}
+
+#[test]
+fn ties_go_to_the_lowest_id_kdtree() {
+    ties_go_to_the_lowest_id::<KdTree>();
 }
