@@ -530,6 +530,7 @@ impl MatcherOutcome {
         for (k, v) in [
             ("residual_mean_mm", json!(s.residual_mean_mm)),
             ("certainty_mean", json!(s.certainty_mean)),
+            ("sigma_mean_mm", json!(s.sigma_mean_mm)),
             ("ms_per_scan_median", json!(s.ms_per_scan_median)),
             ("ms_per_scan_p99", json!(s.ms_per_scan_p99)),
             ("map_points", json!(s.map_points)),
@@ -587,6 +588,10 @@ fn ratios(outcomes: &[MatcherOutcome]) -> Value {
         m.insert(
             "certainty".into(),
             ratio(b.summary.certainty_mean, i.summary.certainty_mean),
+        );
+        m.insert(
+            "sigma".into(),
+            ratio(b.summary.sigma_mean_mm, i.summary.sigma_mean_mm),
         );
         // Per scan (paper Fig. 4c-d): the mean is at the mercy of a few near-degenerate
         // incremental matches, the median is not.
@@ -726,22 +731,24 @@ fn run_once(
 }
 
 /// Figures of one matcher summarised over the worlds of `--worlds`.
-const WORLD_FIGURES: [&str; 7] = [
+const WORLD_FIGURES: [&str; 8] = [
     "ate_rmse_m",
     "final_error_m",
     "rpe_trans_per_m",
     "residual_mean_mm",
     "certainty_mean",
+    "sigma_mean_mm",
     "ms_per_scan_median",
     "fallbacks",
 ];
 
 /// Ratios of a boosted / incremental pair summarised over the worlds of `--worlds`.
-const WORLD_RATIOS: [&str; 5] = [
+const WORLD_RATIOS: [&str; 6] = [
     "ate",
     "final_error",
     "residual",
     "certainty",
+    "sigma",
     "certainty_per_scan_median",
 ];
 
@@ -859,11 +866,12 @@ fn worlds_table(report: &Value, kinds: &[MatcherKind]) -> String {
         ),
         _ => "-".into(),
     };
-    let columns: [(&str, &str, f64, usize); 5] = [
+    let columns: [(&str, &str, f64, usize); 6] = [
         ("ATE m", "ate_rmse_m", 1.0, 2),
         ("final m", "final_error_m", 1.0, 2),
         ("resid. mm", "residual_mean_mm", 1.0, 1),
-        ("certainty mm", "certainty_mean", 1e3, 1),
+        ("certainty mm²", "certainty_mean", 1e6, 1),
+        ("σ mm", "sigma_mean_mm", 1.0, 1),
         ("ms/scan", "ms_per_scan_median", 1.0, 2),
     ];
     let mut rows = vec![
@@ -912,7 +920,7 @@ fn worlds_table(report: &Value, kinds: &[MatcherKind]) -> String {
     if let Some(ratios) = report["ratios"].as_object().filter(|r| !r.is_empty()) {
         text += "\nboosted / incremental, median [min-max]:";
         for (pair, r) in ratios {
-            let parts: Vec<String> = ["ate", "residual", "certainty"]
+            let parts: Vec<String> = ["ate", "residual", "certainty", "sigma"]
                 .iter()
                 .map(|k| format!("{k} {}", cell(&r[*k], 1.0, 3)))
                 .collect();
@@ -1122,7 +1130,7 @@ fn draw_pictures(
             "certainty ratio (boosted / incremental)",
             &certainty,
         )?;
-        pictures.insert("certainty.png".into(), json!("per scan, the boosted matcher's certainty sqrt(σx²+σy²) divided by the incremental one's; dashed: 1, thick: the mean (paper Fig. 4c-d)"));
+        pictures.insert("certainty.png".into(), json!("per scan, the boosted matcher's certainty sqrt(σxx²+σyy²) (covariance diagonal, m²) divided by the incremental one's; dashed: 1, thick: the mean (paper Fig. 4c-d)"));
     }
     Ok(Value::Object(pictures))
 }
@@ -1146,7 +1154,8 @@ fn table(summary: &Value, kinds: &[MatcherKind]) -> String {
     }
     head.extend([
         "resid. mm",
-        "certainty mm",
+        "certainty mm²",
+        "σ mm",
         "ms/scan",
         "p99 ms",
         "map pts",
@@ -1166,13 +1175,14 @@ fn table(summary: &Value, kinds: &[MatcherKind]) -> String {
         }
         if matched {
             r.push(f(&m["residual_mean_mm"], 1.0, 2));
-            r.push(f(&m["certainty_mean"], 1e3, 2));
+            r.push(f(&m["certainty_mean"], 1e6, 2));
+            r.push(f(&m["sigma_mean_mm"], 1.0, 2));
             r.push(f(&m["ms_per_scan_median"], 1.0, 2));
             r.push(f(&m["ms_per_scan_p99"], 1.0, 2));
             r.push(m["map_points"].to_string());
             r.push(m["fallbacks"].to_string());
         } else {
-            r.extend(std::iter::repeat_n("-".to_string(), 6));
+            r.extend(std::iter::repeat_n("-".to_string(), 7));
         }
         rows.push(r);
     };
@@ -1222,6 +1232,7 @@ fn table(summary: &Value, kinds: &[MatcherKind]) -> String {
                 "residual",
                 "certainty",
                 "certainty_per_scan_median",
+                "sigma",
                 "relations_trans",
             ]
             .iter()

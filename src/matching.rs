@@ -21,8 +21,11 @@ pub struct ScanRow {
     pub correspondences: usize,
     /// Residual correlation distance (mm); NaN for a fallback.
     pub residual_mm: f64,
-    /// Matching certainty sqrt(σx² + σy²) (m); NaN for a fallback.
+    /// Matching certainty sqrt(σxx² + σyy²) of the paper's Fig. 4c-d (m²); NaN for a
+    /// fallback. See [`MatchResult::certainty`](qicp_core::MatchResult::certainty).
     pub certainty: f64,
+    /// Position standard deviation sqrt(σxx + σyy) (mm); NaN for a fallback.
+    pub sigma_mm: f64,
     /// Wall time of this scan (ms).
     pub ms: f64,
     /// Whether the scan entered the reference.
@@ -49,8 +52,10 @@ pub struct MatchSummary {
     pub map_points: usize,
     /// Mean residual correlation distance over matched scans (mm).
     pub residual_mean_mm: f64,
-    /// Mean matching certainty over matched scans (m).
+    /// Mean matching certainty over matched scans (m²).
     pub certainty_mean: f64,
+    /// Mean position standard deviation over matched scans (mm).
+    pub sigma_mean_mm: f64,
     /// Scans that fell back to odometry (the first scan, with nothing to match, included).
     pub fallbacks: usize,
     /// Fallbacks by reason.
@@ -161,6 +166,11 @@ impl Matching {
             } else {
                 f64::NAN
             },
+            sigma_mm: if matched {
+                result.position_sigma() * 1e3
+            } else {
+                f64::NAN
+            },
             ms: elapsed.as_secs_f64() * 1e3,
             inserted,
             fallback: result.fallback,
@@ -192,6 +202,7 @@ impl Matching {
             map_points: self.odometry.reference_points().len(),
             residual_mean_mm: mean(rows.iter().map(|r| r.residual_mm)),
             certainty_mean: mean(rows.iter().map(|r| r.certainty)),
+            sigma_mean_mm: mean(rows.iter().map(|r| r.sigma_mm)),
             fallbacks: rows.iter().filter(|r| r.fallback.is_some()).count(),
             fallback_reasons: reasons,
             inserted: rows.iter().filter(|r| r.inserted).count(),
@@ -229,12 +240,12 @@ pub fn run_matcher(
 pub fn write_rows<W: Write>(mut w: W, rows: &[ScanRow]) -> std::io::Result<()> {
     writeln!(
         w,
-        "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback"
+        "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm"
     )?;
     for r in rows {
         writeln!(
             w,
-            "{},{},{},{:.4},{:.6e},{:.4},{},{}",
+            "{},{},{},{:.4},{:.6e},{:.4},{},{},{:.4}",
             r.timestamp,
             r.iterations,
             r.correspondences,
@@ -242,7 +253,8 @@ pub fn write_rows<W: Write>(mut w: W, rows: &[ScanRow]) -> std::io::Result<()> {
             r.certainty,
             r.ms,
             u8::from(r.inserted),
-            r.fallback.map(|f| f.to_string()).unwrap_or_default()
+            r.fallback.map(|f| f.to_string()).unwrap_or_default(),
+            r.sigma_mm
         )?;
     }
     Ok(())

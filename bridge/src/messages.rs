@@ -190,7 +190,7 @@ pub struct PoseMessage {
     pub covariance: [f64; 9],
     /// Residual correlation distance (m); NaN for a fallback.
     pub residual: f64,
-    /// Matching certainty sqrt(σxx² + σyy²) (m); NaN for a fallback.
+    /// Matching certainty sqrt(σxx² + σyy²) of the covariance diagonal (m²); NaN for a fallback.
     pub certainty: f64,
     /// [`fallback_code`]: 0 if matched, else why the scan fell back to odometry.
     pub fallback: u32,

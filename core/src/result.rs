@@ -71,10 +71,21 @@ impl MatchResult {
         }
     }
 
-    /// Matching certainty of the paper's Fig. 4c-d: `sqrt(σx² + σy²)` from the covariance
-    /// diagonal (m). Smaller is more certain.
+    /// Matching certainty of the paper's Fig. 4c-d: its two on-diagonal position elements
+    /// σxx, σyy (variances) combined into a Euclidean distance, `sqrt(σxx² + σyy²)` (m²).
+    /// Smaller is more certain. A ratio of two certainties is about the square of the ratio of
+    /// their [`position_sigma`](Self::position_sigma).
     #[must_use]
     pub fn certainty(&self) -> f64 {
+        self.covariance[(0, 0)]
+            .max(0.0)
+            .hypot(self.covariance[(1, 1)].max(0.0))
+    }
+
+    /// Position standard deviation `sqrt(σxx + σyy)` (m): the root of the covariance's
+    /// position trace, in the units of the pose.
+    #[must_use]
+    pub fn position_sigma(&self) -> f64 {
         (self.covariance[(0, 0)].max(0.0) + self.covariance[(1, 1)].max(0.0)).sqrt()
     }
 }

@@ -208,7 +208,7 @@ fn ties_go_to_the_lowest_id<I: SpatialIndex + Default>() {
         }
         let mut map = I::default();
         for p in &map_points {
-            map.insert(*p).unwrap();
+            map.insert(*p).expect("a finite point");
         }
         let pose = Pose2::IDENTITY;
         let local: Vec<Point2<f64>> = (0..30)
