@@ -22,8 +22,9 @@
 //! Outputs in `--out DIR` (default `out/<config stem>`):
 //!
 //! - `summary.json`: per matcher ATE/RPE/final error (with ground truth), Freiburg relation
-//!   errors (with relations), residual, certainty, timing, map size, fallbacks; the same for
-//!   raw odometry; boosted/incremental ratios; the experiment's wall time;
+//!   errors (with relations), residual, certainty (m²) and position σ, timing, map size,
+//!   fallbacks; the same for raw odometry; boosted/incremental ratios; the experiment's wall
+//!   time;
 //! - `<kind>/trajectory.tum`, `<kind>/matches.csv`, `<kind>/config.toml`;
 //! - `groundtruth.tum` (when known), `odometry.tum`;
 //! - `config.toml`: the effective experiment, every matcher's parameters spelled out (it runs
@@ -556,7 +557,7 @@ pub fn incremental_of(kind: MatcherKind) -> Option<MatcherKind> {
 }
 
 /// Boosted / incremental ratios of every boosted kind whose twin also ran:
-/// `{"q-wsm/wsm": {"ate": …, "residual": …, "certainty": …, "relations_trans": …}}`.
+/// `{"q-wsm/wsm": {"ate": …, "residual": …, "certainty": …, "sigma": …, "relations_trans": …}}`.
 fn ratios(outcomes: &[MatcherOutcome]) -> Value {
     let mut out = Map::new();
     for b in outcomes {

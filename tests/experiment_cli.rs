@@ -101,6 +101,7 @@ fn run_writes_summary_trajectories_csvs_config_and_pictures() {
             "final_error_m",
             "residual_mean_mm",
             "certainty_mean",
+            "sigma_mean_mm",
             "ms_per_scan_median",
             "ms_per_scan_p99",
             "map_points",
@@ -132,7 +133,7 @@ fn run_writes_summary_trajectories_csvs_config_and_pictures() {
         );
     }
     for pair in ["q-idc/idc", "q-wsm/wsm", "kd-wsm/wsm"] {
-        for key in ["ate", "residual", "certainty"] {
+        for key in ["ate", "residual", "certainty", "sigma"] {
             assert!(
                 summary["ratios"][pair].get(key).is_some(),
                 "ratios.{pair}: no `{key}`"

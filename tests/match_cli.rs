@@ -62,6 +62,7 @@ fn match_writes_every_output() {
         "map_points",
         "residual_mean_mm",
         "certainty_mean",
+        "sigma_mean_mm",
         "fallbacks",
     ] {
         assert!(summary.get(key).is_some(), "summary lacks {key}: {summary}");
@@ -81,8 +82,32 @@ fn match_writes_every_output() {
     assert_eq!(poses.len(), 60);
     assert!(poses.iter().all(|l| l.split_whitespace().count() == 8));
     let csv = text(&out.join("matches.csv"));
-    assert!(csv.starts_with("timestamp,iterations,correspondences,residual_mm,certainty,ms"));
+    assert_eq!(
+        csv.lines().next(),
+        Some(
+            "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm"
+        )
+    );
     assert_eq!(csv.lines().count(), 61);
+    // certainty = sqrt(σxx² + σyy²) (m²) and σ = sqrt(σxx + σyy) (mm) of the same covariance:
+    // σ²/√2 ≤ certainty ≤ σ² for non-negative σxx, σyy.
+    let mut matched = 0;
+    for row in csv.lines().skip(1) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let certainty: f64 = cells[4].parse().expect("certainty");
+        let sigma_m = cells[8].parse::<f64>().expect("sigma_mm") / 1e3;
+        if certainty.is_nan() {
+            assert!(sigma_m.is_nan(), "{row}");
+            continue;
+        }
+        let var = sigma_m * sigma_m;
+        assert!(
+            certainty <= var * (1.0 + 1e-3) && certainty >= var / 2f64.sqrt() * (1.0 - 1e-3),
+            "{row}"
+        );
+        matched += 1;
+    }
+    assert_eq!(matched, 59);
     // The effective config is complete and loads again.
     let config = text(&out.join("config.toml"));
     assert!(config.contains("[matcher.wsm]") && config.contains("[matcher.relevance]"));

@@ -23,7 +23,7 @@ import time
 
 import iceoryx2 as iox2
 
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 KIND_DATA = 0
 KIND_END_OF_STREAM = 1
 FLAG_HAS_TRUTH = 1

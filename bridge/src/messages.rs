@@ -8,8 +8,10 @@
 use iceoryx2::prelude::ZeroCopySend;
 use qicp_core::{BeamGeometry, Fallback, MatchResult, Pose2, Record, Scan, ScanError};
 
-/// Version of the layout below; bumped on any change, checked by every subscriber.
-pub const LAYOUT_VERSION: u32 = 1;
+/// Version of the layout below; bumped on any change of a field's place, type or meaning,
+/// checked by every subscriber. 2: `certainty` is sqrt(σxx² + σyy²) in m² (was sqrt(σxx + σyy)
+/// in m).
+pub const LAYOUT_VERSION: u32 = 2;
 
 /// `kind` of a message carrying data (a scan or a pose).
 pub const KIND_DATA: u32 = 0;

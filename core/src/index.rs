@@ -3,7 +3,10 @@
 //!
 //! Every implementation must return the same *distances* as [`BruteForce`] (ties between
 //! equidistant points may be broken differently). Distances are computed everywhere with
-//! [`dist_sq`], so equal answers are bit-identical, not merely close.
+//! [`dist_sq`], so equal answers are bit-identical, not merely close. A correspondence rule
+//! whose own criterion can tie breaks the tie by [`PointId`] (IDC's matching-range rule, where
+//! quantized ranges tie often); a nearest-neighbour tie between two exactly equidistant points
+//! is left to the index.
 
 use nalgebra::Point2;
 use std::ops::Range;

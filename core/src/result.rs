@@ -89,3 +89,16 @@ impl MatchResult {
         (self.covariance[(0, 0)].max(0.0) + self.covariance[(1, 1)].max(0.0)).sqrt()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn certainty_combines_the_position_variances() {
+        let mut r = MatchResult::fallback(Pose2::IDENTITY, Fallback::EmptyReference);
+        r.covariance = Matrix3::new(3e-4, 1e-5, 0.0, 1e-5, 4e-4, 0.0, 0.0, 0.0, 9.0);
+        assert!((r.certainty() - 5e-4).abs() < 1e-15);
+        assert!((r.position_sigma() - 7e-4f64.sqrt()).abs() < 1e-15);
+    }
+}
