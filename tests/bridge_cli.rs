@@ -374,7 +374,7 @@ fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
             "--buffer",
             "4",
             "--delay-ms",
-            "15",
+            "30",
             "--backpressure",
             mode,
             "--service-prefix",
@@ -391,8 +391,12 @@ fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
             "--publish",
             "--max-scans",
             "80",
+            // A scan every 4 ms (the drive's 1 Hz sped up 250×) against a subscriber that
+            // takes 30 ms a scan: about 7 arrive per read into a 4-scan buffer, for 0.3 s. At
+            // full speed the whole stream could be sent before the subscriber's first read,
+            // leaving nothing to lose mid-stream.
             "--rate",
-            "max",
+            "250x",
             "--backpressure",
             mode,
             "--wait-subscribers",
