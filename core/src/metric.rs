@@ -73,6 +73,8 @@ struct CachedSearch {
     center: Point2<f64>,
     radius: f64,
     found: Vec<crate::Neighbour>,
+    /// [`NearestCache`] only: the slack of this entry's next fill (m); 0 before the first.
+    slack: f64,
 }
 
 /// Identity of a reference for the caches: its length and first point. The caches are kept
@@ -90,10 +92,13 @@ fn reference_identity<I: SpatialIndex>(reference: &I) -> (usize, Point2<f64>) {
 
 /// Nearest-neighbour searches cached between the iterations of one scan, one entry per scan
 /// point. A miss asks the index for the nearest point and then keeps every point within that
-/// distance plus [`NearestCache::SLACK`]; while the scan point stays inside that disc, the
+/// distance plus a slack; while the scan point stays inside that disc, the
 /// answer is found among the kept points alone, with the same distance as a fresh search
 /// (any point nearer than the kept answer lies inside the disc). Late iterations move the
-/// points by millimetres, so most of their queries become a scan of a dozen points.
+/// points by millimetres, so most of their queries become a scan of a dozen points. The slack
+/// adapts per entry between [`MIN_SLACK`](NearestCache::MIN_SLACK) and
+/// [`SLACK`](NearestCache::SLACK) so that a fill keeps about 8-32 points: a q-wsm map that
+/// holds every point of every relevant scan put hundreds into a 5 cm slack.
 #[derive(Debug, Clone, Default)]
 struct NearestCache {
     entries: Vec<CachedSearch>,
@@ -103,6 +108,13 @@ struct NearestCache {
 impl NearestCache {
     /// How far a point may move and still be answered from its entry (m).
     const SLACK: f64 = 0.05;
+    /// Smallest slack an entry adapts down to (m).
+    const MIN_SLACK: f64 = 0.005;
+    /// An entry that kept more points than this halves its slack for its next fill; one
+    /// that kept fewer than [`FEW`](Self::FEW) doubles it (up to [`SLACK`](Self::SLACK)).
+    const MANY: usize = 32;
+    /// See [`MANY`](Self::MANY).
+    const FEW: usize = 8;
     /// Neighbourhoods wider than this are not kept (m): far from everything, a point's
     /// disc would hold too many points to be worth scanning.
     const MAX_RADIUS: f64 = 0.3;
@@ -168,9 +180,19 @@ impl NearestCache {
         let nearest = reference.nearest_within(p, max_dist_sq);
         let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
         if reach <= Self::MAX_RADIUS {
+            if entry.slack == 0.0 {
+                entry.slack = Self::SLACK;
+            }
             entry.center = *p;
-            entry.radius = reach + Self::SLACK;
+            entry.radius = reach + entry.slack;
             reference.within_radius(p, entry.radius, &mut entry.found);
+            // Dense maps fill a wide disc with hundreds of points, sparse ones leave a narrow
+            // one empty: each entry (the same beam scan after scan) finds its own width.
+            if entry.found.len() > Self::MANY {
+                entry.slack = (entry.slack * 0.5).max(Self::MIN_SLACK);
+            } else if entry.found.len() < Self::FEW {
+                entry.slack = (entry.slack * 2.0).min(Self::SLACK);
+            }
         } else {
             entry.radius = -1.0;
         }

@@ -32,34 +32,49 @@ fn brute_mutual(map: &[Point2<f64>], scan_ref: &[Point2<f64>], max_dist: f64) ->
     out
 }
 
-/// 181 points of `map` within 8 m of `pose` (all when fewer), moved by up to 2 cm and taken
-/// in the frame of `pose`.
-fn scan_near(map: &[Point2<f64>], pose: &Pose2, seed: u64) -> Vec<Point2<f64>> {
+/// 181 points of `map` within 8·`scale` m of `pose` (all when fewer), moved by up to
+/// 2·`scale` cm and taken in the frame of `pose`.
+fn scan_near(map: &[Point2<f64>], pose: &Pose2, seed: u64, scale: f64) -> Vec<Point2<f64>> {
     let mut r = SplitMix::new(seed);
     let o = Point2::new(pose.x, pose.y);
-    let seen: Vec<&Point2<f64>> = map.iter().filter(|m| dist_sq(m, &o) < 64.0).collect();
+    let (reach, noise) = (8.0 * scale, 0.02 * scale);
+    let seen: Vec<&Point2<f64>> = map
+        .iter()
+        .filter(|m| dist_sq(m, &o) < reach * reach)
+        .collect();
     (0..181.min(seen.len()))
         .map(|_| {
             let m = seen[(r.next_u64() % seen.len() as u64) as usize];
-            let noisy = Point2::new(m.x + r.range(-0.02, 0.02), m.y + r.range(-0.02, 0.02));
+            let noisy = Point2::new(m.x + r.range(-noise, noise), m.y + r.range(-noise, noise));
             pose.inverse_transform_point(&noisy)
         })
         .collect()
 }
 
-fn check<M: SpatialIndex + Default, S: SpatialIndex + Default>() {
-    let map_points = laser_scans(20_000, 11);
+/// One metric over 20 scans, as a matcher uses it. The laser-scan map is shrunk by `scale`:
+/// at 1 its walls hold a point every ~1.3 cm, at 0.1 every ~1.3 mm, so the kept
+/// neighbourhoods (whose widths are in metres, not in map units) hold hundreds of points and
+/// adapt their width scan after scan.
+fn check<M: SpatialIndex + Default, S: SpatialIndex + Default>(scale: f64) {
+    let map_points: Vec<Point2<f64>> = laser_scans(20_000, 11)
+        .into_iter()
+        .map(|p| Point2::new(p.x * scale, p.y * scale))
+        .collect();
     let mut map = M::default();
     for p in &map_points {
         map.insert(*p).unwrap();
     }
     let mut r = SplitMix::new(5);
     let mut compared = 0;
+    let mut metric = MutualNearest::<S>::default();
     for trial in 0..20 {
         // A scan of map points near a pose, with centimetres of noise, in its own frame.
-        let mut pose = Pose2::new(r.range(-15.0, 15.0), r.range(-5.0, 5.0), r.range(-3.0, 3.0));
-        let local = scan_near(&map_points, &pose, 100 + trial);
-        let mut metric = MutualNearest::<S>::default();
+        let mut pose = Pose2::new(
+            r.range(-15.0, 15.0) * scale,
+            r.range(-5.0, 5.0) * scale,
+            r.range(-3.0, 3.0),
+        );
+        let local = scan_near(&map_points, &pose, 100 + trial, scale);
         metric.begin_scan(&local);
         let mut pairs: Vec<Pair> = Vec::new();
         // The estimate wanders as an iteration moves it, with the gate shrinking: the searches
@@ -68,11 +83,11 @@ fn check<M: SpatialIndex + Default, S: SpatialIndex + Default>() {
             let step = if it % 5 == 4 { 0.2 } else { 0.005 };
             pose = pose
                 * Pose2::new(
-                    r.range(-step, step),
-                    r.range(-step, step),
+                    r.range(-step, step) * scale,
+                    r.range(-step, step) * scale,
                     r.range(-step, step),
                 );
-            let max_dist = [0.5, 0.25, 0.1][it / 4];
+            let max_dist = [0.5, 0.25, 0.1][it / 4] * scale;
             let moved: Vec<Point2<f64>> = local.iter().map(|p| pose * *p).collect();
             let query = Query {
                 local: &local,
@@ -99,7 +114,7 @@ fn check_new_reference<M: SpatialIndex + Default>() {
     let first: Vec<Point2<f64>> = laser_scans(5_000, 21);
     let second: Vec<Point2<f64>> = first.iter().map(|p| Point2::new(p.x + 0.03, p.y)).collect();
     let pose = Pose2::new(0.2, -0.1, 0.05);
-    let local = scan_near(&first, &pose, 22);
+    let local = scan_near(&first, &pose, 22, 1.0);
     let moved: Vec<Point2<f64>> = local.iter().map(|p| pose * *p).collect();
     let query = Query {
         local: &local,
@@ -129,15 +144,25 @@ fn a_new_reference_is_searched_afresh() {
 
 #[test]
 fn alg2_over_quadtrees_equals_brute_force() {
-    check::<QuadTree, QuadTree>();
+    check::<QuadTree, QuadTree>(1.0);
 }
 
 #[test]
 fn alg2_over_kdtrees_equals_brute_force() {
-    check::<KdTree, KdTree>();
+    check::<KdTree, KdTree>(1.0);
 }
 
 #[test]
 fn alg2_over_brute_force_indexes_equals_brute_force() {
-    check::<BruteForce, BruteForce>();
+    check::<BruteForce, BruteForce>(1.0);
+}
+
+#[test]
+fn alg2_over_dense_quadtrees_equals_brute_force() {
+    check::<QuadTree, QuadTree>(0.1);
+}
+
+#[test]
+fn alg2_over_dense_kdtrees_equals_brute_force() {
+    check::<KdTree, KdTree>(0.1);
 }
