@@ -22,9 +22,10 @@ fn text(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
-/// A short corridor drive as a CARMEN log with ground truth.
-fn corridor_log() -> PathBuf {
-    let dir = temp("sim");
+/// A short corridor drive as a CARMEN log with ground truth, in a directory of its own per
+/// `test` (the tests run in parallel, and each clears its directory first).
+fn corridor_log(test: &str) -> PathBuf {
+    let dir = temp(&format!("sim-{test}"));
     let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/worlds/corridor.toml");
     let o = qicp(&[
         "sim",
@@ -40,7 +41,7 @@ fn corridor_log() -> PathBuf {
 
 #[test]
 fn match_writes_every_output() {
-    let sim = corridor_log();
+    let sim = corridor_log("outputs");
     let out = temp("out");
     let log = sim.join("sim.log");
     let o = qicp(&[
@@ -134,7 +135,7 @@ fn match_writes_every_output() {
 
 #[test]
 fn malformed_lines_name_the_line_or_are_counted() {
-    let sim = corridor_log();
+    let sim = corridor_log("malformed");
     let log = text(&sim.join("sim.log"));
     let mut lines: Vec<&str> = log.lines().collect();
     let at = lines
