@@ -360,7 +360,9 @@ fn restarted_publisher_is_picked_up() {
     assert!(received > 25 && received < 225, "{s}");
 }
 
-fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
+/// A subscriber that takes 30 ms a scan, fed `scans` scans of the park drive.
+fn slow_subscriber(mode: &str, scans: u32) -> (serde_json::Value, serde_json::Value) {
+    let scans = scans.to_string();
     let dir = tempdir(mode);
     let p = prefix(mode);
     let out = dir.join("sub");
@@ -390,11 +392,11 @@ fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
             PARK,
             "--publish",
             "--max-scans",
-            "80",
+            &scans,
             // A scan every 4 ms (the drive's 1 Hz sped up 250×) against a subscriber that
-            // takes 30 ms a scan: about 7 arrive per read into a 4-scan buffer, for 0.3 s. At
-            // full speed the whole stream could be sent before the subscriber's first read,
-            // leaving nothing to lose mid-stream.
+            // takes 30 ms a scan: about 7 arrive per read into a 4-scan buffer. At full speed
+            // the whole stream could be sent before the subscriber's first read, leaving
+            // nothing to lose mid-stream.
             "--rate",
             "250x",
             "--backpressure",
@@ -414,7 +416,7 @@ fn slow_subscriber(mode: &str) -> (serde_json::Value, serde_json::Value) {
 
 #[test]
 fn slow_subscriber_in_block_mode_loses_nothing() {
-    let (report, s) = slow_subscriber("block");
+    let (report, s) = slow_subscriber("block", 80);
     assert_eq!(s["bridge"]["backpressure"], "block");
     assert_eq!(bridge_u64(&s, "received"), 80, "{s}");
     assert_eq!(bridge_u64(&s, "missing"), 0);
@@ -426,7 +428,9 @@ fn slow_subscriber_in_block_mode_loses_nothing() {
 
 #[test]
 fn slow_subscriber_in_drop_oldest_mode_counts_what_it_lost() {
-    let (_, s) = slow_subscriber("drop-oldest");
+    // 1 s of stream: the subscriber still sets up its pose publisher and matcher after the
+    // publisher starts, and must be reading well before the stream ends.
+    let (_, s) = slow_subscriber("drop-oldest", 250);
     assert_eq!(s["bridge"]["backpressure"], "drop-oldest");
     assert_eq!(s["bridge"]["end"], "end_of_stream");
     let received = bridge_u64(&s, "received");
@@ -437,10 +441,10 @@ fn slow_subscriber_in_drop_oldest_mode_counts_what_it_lost() {
     assert!(missing > 0 && bridge_u64(&s, "gap_events") > 0, "{s}");
     assert_eq!(
         received + missing + before_first,
-        80,
+        250,
         "every scan received or counted lost: {s}"
     );
-    assert_eq!(bridge_u64(&s, "announced"), 80);
+    assert_eq!(bridge_u64(&s, "announced"), 250);
 }
 
 #[test]

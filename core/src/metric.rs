@@ -398,3 +398,67 @@ impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::QuadTree;
+
+    /// A grid of `n`×`n` points `step` apart, from the origin.
+    fn grid(n: usize, step: f64) -> QuadTree {
+        let mut t = QuadTree::default();
+        for i in 0..n {
+            for j in 0..n {
+                t.insert(Point2::new(i as f64 * step, j as f64 * step))
+                    .expect("a finite point");
+            }
+        }
+        t
+    }
+
+    /// Queries near the middle of a grid, `rounds` scans of a few iterations each, every
+    /// answer compared with a fresh search.
+    fn run(cache: &mut NearestCache, map: &QuadTree, centre: f64, rounds: usize) {
+        let queries: Vec<Point2<f64>> = (0..10)
+            .map(|k| Point2::new(centre + 0.0007 * k as f64, centre - 0.0011 * k as f64))
+            .collect();
+        for round in 0..rounds {
+            cache.reset();
+            cache.prepare(map, queries.len());
+            for it in 0..4 {
+                let shift = 0.0003 * (round * 4 + it) as f64;
+                for (k, q) in queries.iter().enumerate() {
+                    let p = Point2::new(q.x + shift, q.y - 0.5 * shift);
+                    let got = cache.nearest_within(map, k, &p, 0.04);
+                    let want = map.nearest_within(&p, 0.04);
+                    assert_eq!(got.map(|n| n.dist_sq), want.map(|n| n.dist_sq));
+                }
+            }
+        }
+    }
+
+    /// In a dense map an entry's slack narrows to the floor (a 5 cm slack would keep thousands
+    /// of points of a 2 mm grid); in a sparse one it widens back to the ceiling. Answers equal
+    /// fresh searches throughout.
+    #[test]
+    fn the_slack_follows_the_density_and_answers_stay_exact() {
+        let mut cache = NearestCache::default();
+        let dense = grid(150, 0.002);
+        run(&mut cache, &dense, 0.15, 8);
+        assert!(
+            cache
+                .entries
+                .iter()
+                .all(|e| e.slack == NearestCache::MIN_SLACK),
+            "{:?}",
+            cache.entries.iter().map(|e| e.slack).collect::<Vec<_>>()
+        );
+        let sparse = grid(20, 0.15);
+        run(&mut cache, &sparse, 1.5, 8);
+        assert!(
+            cache.entries.iter().all(|e| e.slack == NearestCache::SLACK),
+            "{:?}",
+            cache.entries.iter().map(|e| e.slack).collect::<Vec<_>>()
+        );
+    }
+}
