@@ -150,27 +150,24 @@ impl Matching {
             result,
             inserted,
         } = estimate;
-        let matched = result.fallback.is_none();
+        // A fallback has no residual or covariance of its own.
+        let (residual_mm, certainty, sigma_mm) = if result.fallback.is_none() {
+            (
+                result.residual * 1e3,
+                result.certainty(),
+                result.position_sigma() * 1e3,
+            )
+        } else {
+            (f64::NAN, f64::NAN, f64::NAN)
+        };
         self.trajectory.push((record.timestamp(), pose));
         self.rows.push(ScanRow {
             timestamp: record.timestamp(),
             iterations: result.iterations,
             correspondences: result.correspondences,
-            residual_mm: if matched {
-                result.residual * 1e3
-            } else {
-                f64::NAN
-            },
-            certainty: if matched {
-                result.certainty()
-            } else {
-                f64::NAN
-            },
-            sigma_mm: if matched {
-                result.position_sigma() * 1e3
-            } else {
-                f64::NAN
-            },
+            residual_mm,
+            certainty,
+            sigma_mm,
             ms: elapsed.as_secs_f64() * 1e3,
             inserted,
             fallback: result.fallback,

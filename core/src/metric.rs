@@ -73,7 +73,7 @@ struct CachedSearch {
     center: Point2<f64>,
     radius: f64,
     found: Vec<crate::Neighbour>,
-    /// [`NearestCache`] only: the slack of this entry's next fill (m); 0 before the first.
+    /// [`NearestCache`] only: the slack of this entry's next fill (m).
     slack: f64,
 }
 
@@ -137,6 +137,7 @@ impl NearestCache {
         if self.entries.len() < n {
             self.entries.resize_with(n, || CachedSearch {
                 radius: -1.0,
+                slack: Self::SLACK,
                 ..CachedSearch::default()
             });
         }
@@ -180,9 +181,6 @@ impl NearestCache {
         let nearest = reference.nearest_within(p, max_dist_sq);
         let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
         if reach <= Self::MAX_RADIUS {
-            if entry.slack == 0.0 {
-                entry.slack = Self::SLACK;
-            }
             entry.center = *p;
             entry.radius = reach + entry.slack;
             reference.within_radius(p, entry.radius, &mut entry.found);
