@@ -13,3 +13,4 @@ pub mod match_cmd;
 pub mod matching;
 pub mod plots;
 pub mod sim_cmd;
+pub mod sweep;

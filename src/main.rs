@@ -1,6 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-use qicp::{bench, bridge_cmd, eval, experiment, match_cmd, sim_cmd};
+use qicp::{bench, bridge_cmd, eval, experiment, match_cmd, sim_cmd, sweep};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -31,6 +31,9 @@ enum Command {
     Run(experiment::RunArgs),
     /// Simulate a drive and write a CARMEN log, ground truth and odometry.
     Sim(sim_cmd::SimArgs),
+    /// Run a matcher on a log as configured and under fixed input and parameter variants,
+    /// score every run with relations and report how much each variant costs.
+    Sweep(sweep::SweepArgs),
 }
 
 fn main() -> Result<()> {
@@ -42,5 +45,6 @@ fn main() -> Result<()> {
         Command::Replay(a) => bridge_cmd::run_replay(a),
         Command::Run(a) => experiment::run(a),
         Command::Sim(a) => sim_cmd::run(a),
+        Command::Sweep(a) => sweep::run(a),
     }
 }

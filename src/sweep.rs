@@ -1,0 +1,985 @@
+//! `qicp sweep LOG --matcher KIND --relations FILE`: how robust a matcher is to its input and
+//! to its parameters (issue 12).
+//!
+//! The matcher runs on the log once as configured ("default") and once per variant, and every
+//! run is scored with the Freiburg relations. A variant perturbs one thing:
+//!
+//! - **input variants** (deterministic, seeded): fewer scans ([`every_other_record`]), fewer
+//!   beams ([`every_other_beam`]), odometry drift ([`noisy_increment`]), a slipping wheel
+//!   ([`biased_increment`]), range noise ([`noisy_ranges`]), a shorter-sighted laser
+//!   ([`capped_range`]);
+//! - **parameter variants**: every key of
+//!   [`MatcherConfig::steering_parameters`] times 0.7 and times 1.4, one at a time.
+//!
+//! The ratio of a variant is its mean translational relation error over the default's; the
+//! sweep reports the worst and the median ratio. The runs are spread over worker threads; each
+//! run is deterministic, so the figures (all but the wall times) do not depend on `--jobs`.
+
+use crate::eval::{RelationError, evaluate_relations, relation_errors};
+use crate::logs::relations::{Relation, read_relations};
+use crate::logs::tum::Stamped;
+use crate::matching::run_matcher;
+use anyhow::{Context, Result, bail};
+use qicp_core::{BeamGeometry, BeamStatus, Pose2, Record, Scan, ScanError};
+use qicp_matchers::{MatcherConfig, MatcherKind};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+use std::borrow::Cow;
+use std::num::NonZeroUsize;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+/// Association window (s) of the relations: as `qicp match --relations`.
+pub const MAX_DT: f64 = 0.1;
+/// A relation whose translational error exceeds this (m) counts as a failure.
+pub const FAILURE_M: f64 = 0.5;
+/// Seed of the random input variants (issue 12).
+pub const SEED: u64 = 12;
+/// Factors every steering parameter is scaled by, one at a time.
+pub const PARAMETER_FACTORS: [f64; 2] = [0.7, 1.4];
+
+/// Odometry noise: σ of x and y per metre travelled (m/m).
+pub const ODOM_NOISE_XY_PER_M: f64 = 0.05;
+/// Odometry noise: σ of the heading per metre travelled (2°/m, in rad/m).
+pub const ODOM_NOISE_THETA_PER_M: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// Odometry noise: σ of the heading per radian turned (rad/rad).
+pub const ODOM_NOISE_THETA_PER_RAD: f64 = 0.05;
+/// Odometry bias: scale of the translation of every increment.
+pub const ODOM_BIAS_SCALE: f64 = 1.05;
+/// Odometry bias: heading added per metre travelled (1°/m, in rad/m).
+pub const ODOM_BIAS_THETA_PER_M: f64 = std::f64::consts::PI / 180.0;
+/// Range noise σ (m).
+pub const RANGE_NOISE_SIGMA: f64 = 0.01;
+/// Maximum range (m) of the `max-range-10` variant.
+pub const CAPPED_MAX_RANGE: f64 = 10.0;
+
+/// Arguments of `qicp sweep`.
+#[derive(Debug, clap::Args)]
+pub struct SweepArgs {
+    /// CARMEN log (plain or .bz2).
+    pub log: PathBuf,
+    /// Matcher kind: idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm. Overrides the config's kind.
+    #[arg(long)]
+    pub matcher: Option<MatcherKind>,
+    /// TOML file with a `[matcher]` table: the default configuration.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Freiburg relations file every run is scored with.
+    #[arg(long)]
+    pub relations: PathBuf,
+    /// Print the report as JSON on stdout (progress stays on stderr).
+    #[arg(long)]
+    pub json: bool,
+    /// Runs at a time (default: the available cores).
+    #[arg(long)]
+    pub jobs: Option<NonZeroUsize>,
+    /// Use only the first N records of the log.
+    #[arg(long)]
+    pub scans: Option<NonZeroUsize>,
+    /// Run only these variants (comma-separated names; the default always runs).
+    #[arg(long, value_delimiter = ',')]
+    pub variants: Option<Vec<String>>,
+    /// Skip and count malformed log lines instead of failing.
+    #[arg(long)]
+    pub lenient: bool,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Variants
+
+/// The input variants: what each does to the log before matching.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputVariant {
+    /// `scans/2`: every second record.
+    EveryOtherRecord,
+    /// `beams/2`: every second beam of every scan.
+    EveryOtherBeam,
+    /// `odom-noise`: random odometry drift.
+    OdometryNoise,
+    /// `odom-bias`: systematic odometry drift.
+    OdometryBias,
+    /// `range-noise`: Gaussian noise on the valid ranges.
+    RangeNoise,
+    /// `max-range-10`: returns beyond 10 m dropped.
+    MaxRange10,
+}
+
+impl InputVariant {
+    /// Every input variant, in report order.
+    pub const ALL: [InputVariant; 6] = [
+        InputVariant::EveryOtherRecord,
+        InputVariant::EveryOtherBeam,
+        InputVariant::OdometryNoise,
+        InputVariant::OdometryBias,
+        InputVariant::RangeNoise,
+        InputVariant::MaxRange10,
+    ];
+
+    /// The variant's name on the command line and in reports.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            InputVariant::EveryOtherRecord => "scans/2",
+            InputVariant::EveryOtherBeam => "beams/2",
+            InputVariant::OdometryNoise => "odom-noise",
+            InputVariant::OdometryBias => "odom-bias",
+            InputVariant::RangeNoise => "range-noise",
+            InputVariant::MaxRange10 => "max-range-10",
+        }
+    }
+
+    /// The records perturbed (the random variants draw from a generator seeded with
+    /// [`SEED`], so the result is always the same).
+    pub fn apply(self, records: &[Record]) -> Result<Vec<Record>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+        let scans = |f: &mut dyn FnMut(&Scan) -> Result<Scan, ScanError>| {
+            records
+                .iter()
+                .map(|r| {
+                    let mut out = r.clone();
+                    out.scan = f(&r.scan)
+                        .with_context(|| format!("{}: scan at {} s", self.name(), r.timestamp()))?;
+                    Ok(out)
+                })
+                .collect::<Result<Vec<_>>>()
+        };
+        match self {
+            InputVariant::EveryOtherRecord => Ok(every_other_record(records)),
+            InputVariant::EveryOtherBeam => scans(&mut every_other_beam),
+            InputVariant::OdometryNoise => Ok(with_odometry_increments(records, |d| {
+                noisy_increment(d, &mut rng)
+            })),
+            InputVariant::OdometryBias => Ok(with_odometry_increments(records, biased_increment)),
+            InputVariant::RangeNoise => {
+                scans(&mut |s| noisy_ranges(s, RANGE_NOISE_SIGMA, &mut rng))
+            }
+            InputVariant::MaxRange10 => scans(&mut |s| capped_range(s, CAPPED_MAX_RANGE)),
+        }
+    }
+}
+
+/// What a variant changes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Perturbation {
+    /// The input.
+    Input(InputVariant),
+    /// One parameter of the configuration, scaled.
+    Parameter {
+        /// Dotted key, as [`MatcherConfig::steering_parameters`] gives it.
+        key: String,
+        /// The factor.
+        factor: f64,
+    },
+}
+
+/// One variant of the sweep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Variant {
+    /// Its name: `scans/2`, `icp.max_dist_start*0.7`…
+    pub name: String,
+    /// What it changes.
+    pub perturbation: Perturbation,
+}
+
+/// Every variant for `config`, in report order: the input variants, then each steering
+/// parameter times each of [`PARAMETER_FACTORS`]. A parameter variant is named by its key
+/// without the leading `matcher.`, a `*` and the factor: `icp.max_dist_start*0.7`.
+#[must_use]
+pub fn all_variants(config: &MatcherConfig) -> Vec<Variant> {
+    let inputs = InputVariant::ALL.into_iter().map(|v| Variant {
+        name: v.name().to_string(),
+        perturbation: Perturbation::Input(v),
+    });
+    let parameters = config.steering_parameters().into_iter().flat_map(|key| {
+        PARAMETER_FACTORS.into_iter().map(move |factor| {
+            let short = key.strip_prefix("matcher.").unwrap_or(&key);
+            Variant {
+                name: format!("{short}*{factor}"),
+                perturbation: Perturbation::Parameter {
+                    key: key.clone(),
+                    factor,
+                },
+            }
+        })
+    });
+    inputs.chain(parameters).collect()
+}
+
+/// The variants named in `names` (in report order, each once); `default` is accepted and
+/// ignored, since the default run always happens. An unknown name is an error listing the
+/// known ones.
+pub fn select_variants(all: Vec<Variant>, names: &[String]) -> Result<Vec<Variant>> {
+    let names: Vec<&str> = names
+        .iter()
+        .map(|n| n.trim())
+        .filter(|n| !n.is_empty() && *n != "default")
+        .collect();
+    let unknown: Vec<&str> = names
+        .iter()
+        .copied()
+        .filter(|n| !all.iter().any(|v| v.name == *n))
+        .collect();
+    if !unknown.is_empty() {
+        let known: Vec<&str> = all.iter().map(|v| v.name.as_str()).collect();
+        bail!(
+            "unknown variant{} {}; known: {}",
+            if unknown.len() > 1 { "s" } else { "" },
+            unknown.join(", "),
+            known.join(", ")
+        );
+    }
+    Ok(all
+        .into_iter()
+        .filter(|v| names.contains(&v.name.as_str()))
+        .collect())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Perturbations
+
+/// A standard normal sample (Box–Muller; `rand_distr` is not a dependency of this package).
+pub fn standard_normal(rng: &mut impl Rng) -> f64 {
+    let u1 = 1.0 - rng.random::<f64>(); // (0, 1]: the logarithm stays finite
+    let u2 = rng.random::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// `scans/2` models a laser (or a matcher) running at half the rate: records 0, 2, 4… kept.
+#[must_use]
+pub fn every_other_record(records: &[Record]) -> Vec<Record> {
+    records.iter().step_by(2).cloned().collect()
+}
+
+/// `beams/2` models a laser of half the angular resolution: beams 0, 2, 4… kept, the bearing
+/// step doubled, so every kept beam keeps its bearing.
+pub fn every_other_beam(scan: &Scan) -> Result<Scan, ScanError> {
+    let ranges = scan.ranges().iter().step_by(2).copied().collect();
+    let geometry = BeamGeometry {
+        angle_increment: scan.geometry.angle_increment * 2.0,
+        ..scan.geometry
+    };
+    Scan::new(scan.timestamp, geometry, ranges)
+}
+
+/// `range-noise` models a noisier range finder: Gaussian noise of σ `sigma` (m) on every
+/// valid reading; no-returns and invalid readings stay as they are.
+pub fn noisy_ranges(scan: &Scan, sigma: f64, rng: &mut impl Rng) -> Result<Scan, ScanError> {
+    let ranges = scan
+        .ranges()
+        .iter()
+        .zip(scan.status())
+        .map(|(&r, &s)| {
+            if s == BeamStatus::Valid {
+                r + sigma * standard_normal(rng)
+            } else {
+                r
+            }
+        })
+        .collect();
+    Scan::new(scan.timestamp, scan.geometry, ranges)
+}
+
+/// `max-range-10` models a shorter-sighted laser: readings at or beyond `max_range` (m) become
+/// no-returns (the geometry's maximum range lowered to it, if higher).
+pub fn capped_range(scan: &Scan, max_range: f64) -> Result<Scan, ScanError> {
+    let geometry = BeamGeometry {
+        max_range: scan.geometry.max_range.min(max_range),
+        ..scan.geometry
+    };
+    Scan::new(scan.timestamp, geometry, scan.ranges().to_vec())
+}
+
+/// The odometry poses with every increment `poses[i-1].between(&poses[i])` (robot frame)
+/// passed through `perturb` and recomposed from the first pose, so that a perturbation of one
+/// increment carries into every later pose, as drift does.
+pub fn perturb_increments(poses: &[Pose2], mut perturb: impl FnMut(Pose2) -> Pose2) -> Vec<Pose2> {
+    let mut out = Vec::with_capacity(poses.len());
+    let mut current = None::<Pose2>;
+    for (i, pose) in poses.iter().enumerate() {
+        let next = match (current, i.checked_sub(1)) {
+            (Some(c), Some(prev)) => c.compose(&perturb(poses[prev].between(pose))),
+            _ => *pose,
+        };
+        out.push(next);
+        current = Some(next);
+    }
+    out
+}
+
+/// The records with their odometry re-derived by [`perturb_increments`].
+pub fn with_odometry_increments(
+    records: &[Record],
+    perturb: impl FnMut(Pose2) -> Pose2,
+) -> Vec<Record> {
+    let poses: Vec<Pose2> = records.iter().map(|r| r.odometry).collect();
+    records
+        .iter()
+        .zip(perturb_increments(&poses, perturb))
+        .map(|(r, odometry)| {
+            let mut out = r.clone();
+            out.odometry = odometry;
+            out
+        })
+        .collect()
+}
+
+/// `odom-noise` models random wheel-odometry error: x and y of the increment get Gaussian
+/// noise of σ 5 cm per metre travelled, the heading σ 2° per metre travelled plus 0.05 rad
+/// per radian turned.
+pub fn noisy_increment(d: Pose2, rng: &mut impl Rng) -> Pose2 {
+    let dist = d.x.hypot(d.y);
+    let sigma_xy = ODOM_NOISE_XY_PER_M * dist;
+    let sigma_theta = ODOM_NOISE_THETA_PER_M * dist + ODOM_NOISE_THETA_PER_RAD * d.theta.abs();
+    // Always three draws, so that one increment's noise never shifts the next one's.
+    let (nx, ny, nt) = (
+        standard_normal(rng),
+        standard_normal(rng),
+        standard_normal(rng),
+    );
+    Pose2::new(
+        d.x + sigma_xy * nx,
+        d.y + sigma_xy * ny,
+        d.theta + sigma_theta * nt,
+    )
+}
+
+/// `odom-bias` models a slipping or mis-calibrated wheel: the increment's translation scaled
+/// by 1.05 and 1° per metre travelled added to its heading (a drift to the left).
+#[must_use]
+pub fn biased_increment(d: Pose2) -> Pose2 {
+    let dist = d.x.hypot(d.y);
+    Pose2::new(
+        ODOM_BIAS_SCALE * d.x,
+        ODOM_BIAS_SCALE * d.y,
+        d.theta + ODOM_BIAS_THETA_PER_M * dist,
+    )
+}
+
+// ---------------------------------------------------------------------------------------------
+// Running
+
+/// The figures of one run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunFigures {
+    /// Mean translational relation error (m).
+    pub trans_mean: f64,
+    /// Largest translational relation error (m).
+    pub trans_max: f64,
+    /// Mean rotational relation error (degrees).
+    pub rot_mean_deg: f64,
+    /// Median wall time per scan (ms): the only figure that varies from run to run.
+    pub ms_per_scan_median: f64,
+    /// Points in the reference at the end.
+    pub map_points: usize,
+    /// Records matched.
+    pub scans: usize,
+    /// Relations evaluated.
+    pub relations: usize,
+    /// Relations without poses at their times (outside the scans, or dropped by `scans/2`).
+    pub relations_missing: usize,
+    /// Relations with a translational error above [`FAILURE_M`].
+    pub relations_over_0_5_m: usize,
+}
+
+/// One run to make.
+#[derive(Debug)]
+struct Job {
+    name: String,
+    input: Option<InputVariant>,
+    /// The configuration, or why the variant has none.
+    config: Result<MatcherConfig, String>,
+}
+
+impl Job {
+    fn run(&self, records: &[Record], relations: &[Relation]) -> Result<RunFigures> {
+        let config = match &self.config {
+            Ok(c) => c,
+            Err(e) => bail!("{e}"),
+        };
+        let records: Cow<'_, [Record]> = match self.input {
+            None => Cow::Borrowed(records),
+            Some(v) => Cow::Owned(v.apply(records)?),
+        };
+        let run = run_matcher(&records, config, false)?;
+        let report = evaluate_relations(&run.trajectory, relations, MAX_DT)?;
+        let (errors, _) = relation_errors(&run.trajectory, relations, MAX_DT)?;
+        Ok(RunFigures {
+            trans_mean: report.trans_mean,
+            trans_max: report.trans_max,
+            rot_mean_deg: report.rot_mean_deg,
+            ms_per_scan_median: run.summary.ms_per_scan_median,
+            map_points: run.summary.map_points,
+            scans: run.summary.scans,
+            relations: report.n,
+            relations_missing: report.missing,
+            relations_over_0_5_m: errors
+                .iter()
+                .map(RelationError::trans)
+                .filter(|&e| e > FAILURE_M)
+                .count(),
+        })
+    }
+}
+
+/// The message of a caught panic.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".to_string())
+}
+
+/// Runs `work` on every item with `jobs` worker threads pulling indices from a shared counter,
+/// calling `done` (on this thread) as each item finishes. The results are in item order; a
+/// panicking item gives an error, not a dead sweep.
+pub fn run_parallel<T: Sync, R: Send>(
+    items: &[T],
+    jobs: usize,
+    work: impl Fn(&T) -> Result<R> + Sync,
+    mut done: impl FnMut(usize, &Result<R, String>, Duration),
+) -> Vec<Result<R, String>> {
+    let next = AtomicUsize::new(0);
+    let mut results: Vec<Option<Result<R, String>>> = items.iter().map(|_| None).collect();
+    std::thread::scope(|s| {
+        let (tx, rx) = std::sync::mpsc::channel();
+        for _ in 0..jobs.clamp(1, items.len().max(1)) {
+            let tx = tx.clone();
+            let (next, work) = (&next, &work);
+            s.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(item) = items.get(i) else { break };
+                    let t0 = Instant::now();
+                    let result =
+                        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(item)))
+                            .map_err(|p| format!("panicked: {}", panic_message(p.as_ref())))
+                            .and_then(|r| r.map_err(|e| format!("{e:#}")));
+                    if tx.send((i, result, t0.elapsed())).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for (i, result, elapsed) in rx {
+            done(i, &result, elapsed);
+            if let Some(slot) = results.get_mut(i) {
+                *slot = Some(result);
+            }
+        }
+    });
+    results
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| Err("no result (worker lost)".to_string())))
+        .collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Report
+
+/// One variant's line of the report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct VariantReport {
+    /// The variant's name.
+    pub name: String,
+    /// Its figures (absent when it could not run).
+    #[serde(flatten)]
+    pub figures: Option<RunFigures>,
+    /// Its `trans_mean` over the default's.
+    pub ratio: Option<f64>,
+    /// Why it could not run (an invalid scaled configuration, say).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+/// The sweep's report (`--json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SweepReport {
+    /// The log.
+    pub log: String,
+    /// Registry name of the matcher.
+    pub matcher: String,
+    /// Records of the log used.
+    pub scans: usize,
+    /// Relations in the relations file.
+    pub relations_total: usize,
+    /// The run with the configuration as given.
+    pub default: RunFigures,
+    /// Every variant, in report order.
+    pub variants: Vec<VariantReport>,
+    /// The largest ratio of the variants that ran.
+    pub worst_ratio: Option<f64>,
+    /// The variant with the largest ratio.
+    pub worst_variant: Option<String>,
+    /// The median ratio of the variants that ran (the mean of the middle two for an even
+    /// count).
+    pub median_ratio: Option<f64>,
+    /// Relations of the default run with a translational error above 0.5 m.
+    pub relations_over_0_5_m: usize,
+}
+
+/// The median (mean of the middle two for an even count); `None` for none.
+fn median(values: &[f64]) -> Option<f64> {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => v.get(n / 2).copied(),
+        _ => Some((v.get(n / 2 - 1)? + v.get(n / 2)?) / 2.0),
+    }
+}
+
+/// Sweeps `variants` of the matcher `config` over `records`, scored with `relations`, with
+/// `jobs` runs at a time; `progress` hears of each run as it finishes (name, result, time).
+pub fn sweep(
+    records: &[Record],
+    relations: &[Relation],
+    config: &MatcherConfig,
+    variants: &[Variant],
+    jobs: usize,
+    mut progress: impl FnMut(&str, &Result<RunFigures, String>, Duration),
+) -> Result<(RunFigures, Vec<VariantReport>)> {
+    let default = Job {
+        name: "default".to_string(),
+        input: None,
+        config: Ok(config.clone()),
+    };
+    let planned = variants.iter().map(|v| match &v.perturbation {
+        Perturbation::Input(i) => Job {
+            name: v.name.clone(),
+            input: Some(*i),
+            config: Ok(config.clone()),
+        },
+        Perturbation::Parameter { key, factor } => Job {
+            name: v.name.clone(),
+            input: None,
+            config: config
+                .scaled(key, *factor)
+                .map(|mut c| {
+                    c.fill_defaults();
+                    c
+                })
+                .map_err(|e| format!("invalid configuration: {e}")),
+        },
+    });
+    let jobs_list: Vec<Job> = std::iter::once(default).chain(planned).collect();
+    let mut results = run_parallel(
+        &jobs_list,
+        jobs,
+        |job| job.run(records, relations),
+        |i, result, elapsed| {
+            if let Some(job) = jobs_list.get(i) {
+                progress(&job.name, result, elapsed);
+            }
+        },
+    )
+    .into_iter();
+    let default = match results.next() {
+        Some(Ok(figures)) => figures,
+        Some(Err(e)) => bail!("the default run failed: {e}"),
+        None => bail!("the default run gave no result"),
+    };
+    let reports = jobs_list
+        .iter()
+        .skip(1)
+        .zip(results)
+        .map(|(job, result)| {
+            let (figures, error) = match result {
+                Ok(f) => (Some(f), None),
+                Err(e) => (None, Some(e)),
+            };
+            VariantReport {
+                name: job.name.clone(),
+                ratio: figures.as_ref().map(|f| f.trans_mean / default.trans_mean),
+                figures,
+                error,
+            }
+        })
+        .collect();
+    Ok((default, reports))
+}
+
+/// Checks that some relation has poses among `records` (by their timestamps), so that a
+/// relations file of another log fails before any matching.
+fn check_relations_cover(records: &[Record], relations: &[Relation], name: &str) -> Result<()> {
+    if relations.is_empty() {
+        bail!("{name} holds no relations");
+    }
+    let stamps: Vec<Stamped> = records
+        .iter()
+        .map(|r| (r.timestamp(), r.odometry))
+        .collect();
+    let (found, _) = relation_errors(&stamps, relations, MAX_DT)?;
+    if found.is_empty() {
+        let (first, last) = match (records.first(), records.last()) {
+            (Some(f), Some(l)) => (f.timestamp(), l.timestamp()),
+            _ => (f64::NAN, f64::NAN),
+        };
+        bail!(
+            "none of the {} relations of {name} falls within the {} scans used ({first} to \
+             {last} s): do they belong to this log?",
+            relations.len(),
+            records.len()
+        );
+    }
+    Ok(())
+}
+
+fn fmt_f(v: f64, decimals: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.decimals$}")
+    } else {
+        "-".to_string()
+    }
+}
+
+/// The report as a table: the default, one line per variant, the summary.
+#[must_use]
+pub fn table(report: &SweepReport) -> String {
+    use std::fmt::Write;
+    let width = report
+        .variants
+        .iter()
+        .map(|v| v.name.len())
+        .chain(std::iter::once("default".len()))
+        .max()
+        .unwrap_or(7);
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "{} on {} ({} scans, {} relations in file)",
+        report.matcher, report.log, report.scans, report.relations_total
+    );
+    let _ = writeln!(
+        out,
+        "{:width$}  {:>10}  {:>9}  {:>8}  {:>6}  {:>6}  {:>6}  {:>10}  {:>7}",
+        "variant",
+        "trans_mean",
+        "trans_max",
+        "rot_mean",
+        "ratio",
+        "n",
+        ">0.5m",
+        "map_points",
+        "ms/scan"
+    );
+    let line = |name: &str, f: &RunFigures, ratio: Option<f64>| {
+        format!(
+            "{name:width$}  {:>10}  {:>9}  {:>8}  {:>6}  {:>6}  {:>6}  {:>10}  {:>7}",
+            fmt_f(f.trans_mean, 4),
+            fmt_f(f.trans_max, 3),
+            fmt_f(f.rot_mean_deg, 3),
+            ratio.map_or_else(|| "-".to_string(), |r| fmt_f(r, 2)),
+            f.relations,
+            f.relations_over_0_5_m,
+            f.map_points,
+            fmt_f(f.ms_per_scan_median, 2),
+        )
+    };
+    let _ = writeln!(out, "{}", line("default", &report.default, Some(1.0)));
+    for v in &report.variants {
+        match (&v.figures, &v.error) {
+            (Some(f), _) => {
+                let _ = writeln!(out, "{}", line(&v.name, f, v.ratio));
+            }
+            (None, e) => {
+                let _ = writeln!(
+                    out,
+                    "{:width$}  error: {}",
+                    v.name,
+                    e.as_deref().unwrap_or("no result")
+                );
+            }
+        }
+    }
+    let _ = writeln!(
+        out,
+        "worst ratio {} ({}), median ratio {}; default: {} of {} relations above {FAILURE_M} m",
+        report
+            .worst_ratio
+            .map_or_else(|| "-".to_string(), |r| fmt_f(r, 2)),
+        report.worst_variant.as_deref().unwrap_or("-"),
+        report
+            .median_ratio
+            .map_or_else(|| "-".to_string(), |r| fmt_f(r, 2)),
+        report.relations_over_0_5_m,
+        report.default.relations
+    );
+    out
+}
+
+/// Runs the command.
+pub fn run(args: SweepArgs) -> Result<()> {
+    // Everything that can be refused is checked before the log is read and before matching.
+    let config = crate::match_cmd::load_config(args.config.as_ref(), args.matcher)?;
+    let relations = read_relations(&args.relations)
+        .with_context(|| format!("reading relations {}", args.relations.display()))?;
+    let relations_name = args.relations.display().to_string();
+    let all = all_variants(&config);
+    let variants = match &args.variants {
+        Some(names) => select_variants(all, names)?,
+        None => all,
+    };
+    let log = crate::logs::carmen::load_for_command(&args.log, args.lenient)?;
+    let mut records = log.records;
+    if let Some(n) = args.scans {
+        records.truncate(n.get());
+    }
+    if records.is_empty() {
+        bail!("{} has no laser records", args.log.display());
+    }
+    check_relations_cover(&records, &relations, &relations_name)?;
+    let jobs = args
+        .jobs
+        .or_else(|| std::thread::available_parallelism().ok())
+        .map_or(1, NonZeroUsize::get);
+    eprintln!(
+        "sweeping {} on {} scans: default + {} variants, {jobs} at a time",
+        config.kind,
+        records.len(),
+        variants.len()
+    );
+    let (default, reports) = sweep(
+        &records,
+        &relations,
+        &config,
+        &variants,
+        jobs,
+        |name, result, elapsed| match result {
+            Ok(f) => eprintln!(
+                "variant {name} done in {:.1} s (trans_mean {} m)",
+                elapsed.as_secs_f64(),
+                fmt_f(f.trans_mean, 4)
+            ),
+            Err(e) => eprintln!("variant {name} failed: {e}"),
+        },
+    )?;
+    let ratios: Vec<(f64, &str)> = reports
+        .iter()
+        .filter_map(|v| v.ratio.map(|r| (r, v.name.as_str())))
+        .filter(|(r, _)| !r.is_nan())
+        .collect();
+    let worst = ratios.iter().copied().max_by(|a, b| a.0.total_cmp(&b.0));
+    let median_ratio = median(&ratios.iter().map(|r| r.0).collect::<Vec<_>>());
+    let report = SweepReport {
+        log: args.log.display().to_string(),
+        matcher: config.kind.name().to_string(),
+        scans: records.len(),
+        relations_total: relations.len(),
+        relations_over_0_5_m: default.relations_over_0_5_m,
+        default,
+        worst_ratio: worst.map(|w| w.0),
+        worst_variant: worst.map(|w| w.1.to_string()),
+        median_ratio,
+        variants: reports,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", table(&report));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan(ranges: Vec<f64>) -> Scan {
+        let geometry = BeamGeometry {
+            angle_min: -1.0,
+            angle_increment: 0.1,
+            max_range: 20.0,
+            min_range: 0.1,
+        };
+        Scan::new(3.0, geometry, ranges).expect("valid scan")
+    }
+
+    fn records(odometry: &[Pose2]) -> Vec<Record> {
+        odometry
+            .iter()
+            .enumerate()
+            .map(|(i, &odometry)| Record {
+                scan: Scan::new(i as f64, BeamGeometry::centered(5, 1.0, 20.0), vec![1.0; 5])
+                    .expect("valid scan"),
+                odometry,
+                truth: None,
+                laser_offset: Pose2::IDENTITY,
+            })
+            .collect()
+    }
+
+    /// A straight drive along x from the origin in `steps` equal steps.
+    fn straight(length: f64, steps: usize) -> Vec<Pose2> {
+        (0..=steps)
+            .map(|i| Pose2::new(length * i as f64 / steps as f64, 0.0, 0.0))
+            .collect()
+    }
+
+    #[test]
+    fn every_other_beam_halves_the_beams_and_keeps_their_bearings() {
+        let s = scan((0..11).map(|i| 1.0 + f64::from(i)).collect());
+        let half = every_other_beam(&s).expect("valid");
+        assert_eq!(half.beams(), 6);
+        for (k, i) in (0..11).step_by(2).enumerate() {
+            assert!((half.geometry.angle(k) - s.geometry.angle(i)).abs() < 1e-12);
+            assert_eq!(half.ranges()[k], s.ranges()[i]);
+        }
+    }
+
+    #[test]
+    fn every_other_record_keeps_the_even_ones() {
+        let r = records(&straight(1.0, 4));
+        let kept: Vec<f64> = every_other_record(&r)
+            .iter()
+            .map(Record::timestamp)
+            .collect();
+        assert_eq!(kept, [0.0, 2.0, 4.0]);
+    }
+
+    #[test]
+    fn odometry_bias_on_a_straight_metre() {
+        // One increment of 1 m: exactly 1.05 m and 1°.
+        let one = biased_increment(Pose2::new(1.0, 0.0, 0.0));
+        assert!((one.x - 1.05).abs() < 1e-12 && one.y.abs() < 1e-12);
+        assert!((one.theta.to_degrees() - 1.0).abs() < 1e-12);
+        // A hundred 1 cm steps: 1.05 m travelled on a gentle arc, 1° turned in all.
+        let poses = perturb_increments(&straight(1.0, 100), biased_increment);
+        let end = poses.last().copied().unwrap_or_default();
+        assert!((end.x.hypot(end.y) - 1.05).abs() < 1e-4, "{end:?}");
+        assert!((end.theta.to_degrees() - 1.0).abs() < 1e-9, "{end:?}");
+        assert_eq!(poses.first().copied(), Some(Pose2::IDENTITY));
+    }
+
+    #[test]
+    fn perturbed_odometry_starts_at_the_first_pose_and_keeps_it_unperturbed() {
+        let start = Pose2::new(3.0, -2.0, 0.5);
+        let path: Vec<Pose2> = straight(2.0, 10).iter().map(|p| start.compose(p)).collect();
+        let same = perturb_increments(&path, |d| d);
+        for (a, b) in path.iter().zip(&same) {
+            assert!(a.distance(b) < 1e-9 && (a.theta - b.theta).abs() < 1e-9);
+        }
+        let biased = perturb_increments(&path, biased_increment);
+        assert_eq!(biased.first(), path.first());
+        let end = biased.last().copied().unwrap_or_default();
+        assert!((start.distance(&end) - 2.1).abs() < 1e-3, "{end:?}");
+    }
+
+    #[test]
+    fn odometry_noise_is_deterministic_for_a_seed_and_drifts() {
+        let r = records(&straight(5.0, 50));
+        let a = InputVariant::OdometryNoise.apply(&r).expect("applies");
+        let b = InputVariant::OdometryNoise.apply(&r).expect("applies");
+        assert_eq!(a, b);
+        let mut rng = ChaCha8Rng::seed_from_u64(SEED + 1);
+        let poses: Vec<Pose2> = r.iter().map(|r| r.odometry).collect();
+        let c = perturb_increments(&poses, |d| noisy_increment(d, &mut rng));
+        assert_ne!(a.last().map(|r| r.odometry), c.last().copied());
+        let drift = a
+            .last()
+            .zip(r.last())
+            .map(|(a, r)| a.odometry.distance(&r.odometry))
+            .unwrap_or_default();
+        assert!(drift > 1e-4 && drift < 1.5, "drift {drift}");
+        // A robot standing still gets no noise.
+        let still = perturb_increments(&[Pose2::IDENTITY; 5], |d| noisy_increment(d, &mut rng));
+        assert!(still.iter().all(|p| *p == Pose2::IDENTITY));
+    }
+
+    #[test]
+    fn range_noise_leaves_invalid_readings_alone() {
+        let s = scan(vec![1.0, f64::NAN, 25.0, 0.05, 2.0, -1.0, 3.0]);
+        let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+        let noisy = noisy_ranges(&s, 0.01, &mut rng).expect("valid");
+        for (i, (&before, &after)) in s.ranges().iter().zip(noisy.ranges()).enumerate() {
+            if s.status()[i] == BeamStatus::Valid {
+                assert_ne!(before, after);
+                assert!((before - after).abs() < 0.06);
+            } else {
+                assert!(before.to_bits() == after.to_bits(), "beam {i} changed");
+            }
+        }
+    }
+
+    #[test]
+    fn capped_range_turns_far_returns_into_no_returns() {
+        let s = scan(vec![1.0, 9.9, 10.0, 15.0]);
+        let capped = capped_range(&s, 10.0).expect("valid");
+        assert_eq!(capped.valid_count(), 2);
+        assert_eq!(capped.status()[3], BeamStatus::MaxRange);
+        assert_eq!(capped.ranges(), s.ranges());
+        // A laser that sees less than 10 m keeps its own range.
+        let near = capped_range(&capped_range(&s, 5.0).expect("valid"), 10.0).expect("valid");
+        assert!((near.geometry.max_range - 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn standard_normal_has_unit_spread() {
+        let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+        let v: Vec<f64> = (0..100_000).map(|_| standard_normal(&mut rng)).collect();
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64;
+        assert!(
+            mean.abs() < 0.01 && (var.sqrt() - 1.0).abs() < 0.01,
+            "{mean} {var}"
+        );
+    }
+
+    #[test]
+    fn variants_follow_the_steering_parameters() {
+        let config = MatcherConfig::defaults(MatcherKind::QWsm);
+        let all = all_variants(&config);
+        let parameters = config.steering_parameters();
+        assert_eq!(all.len(), InputVariant::ALL.len() + 2 * parameters.len());
+        assert!(all.iter().any(|v| v.name == "icp.max_dist_start*0.7"));
+        assert!(all.iter().any(|v| v.name == "icp.max_dist_start*1.4"));
+        let names = [
+            "odom-bias".to_string(),
+            "scans/2".to_string(),
+            "default".to_string(),
+        ];
+        let picked = select_variants(all.clone(), &names).expect("known");
+        let picked: Vec<&str> = picked.iter().map(|v| v.name.as_str()).collect();
+        assert_eq!(picked, ["scans/2", "odom-bias"]);
+        let err = select_variants(all, &["nope".to_string()]).expect_err("unknown");
+        let msg = err.to_string();
+        assert!(msg.contains("nope") && msg.contains("beams/2"), "{msg}");
+    }
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(&[]), None);
+        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), Some(2.5));
+    }
+
+    #[test]
+    fn parallel_results_are_in_item_order_and_panics_are_errors() {
+        let items: Vec<u32> = (0..20).collect();
+        for jobs in [1, 3, 64] {
+            let mut seen = 0;
+            let out = run_parallel(
+                &items,
+                jobs,
+                |&i| {
+                    if i == 7 {
+                        panic!("seven");
+                    }
+                    Ok(i * 2)
+                },
+                |_, _, _| seen += 1,
+            );
+            assert_eq!(seen, 20);
+            for (i, r) in out.iter().enumerate() {
+                match r {
+                    Ok(v) => assert_eq!(*v as usize, i * 2),
+                    Err(e) => assert!(i == 7 && e.contains("seven"), "{e}"),
+                }
+            }
+        }
+    }
+}

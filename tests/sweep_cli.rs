@@ -1,0 +1,231 @@
+//! End to end: `qicp sweep` on the first Intel scans reports the default run and every chosen
+//! variant with consistent ratios, the same figures whatever `--jobs`, an invalid scaled
+//! configuration as an error of its variant, and refuses an unknown variant or a missing
+//! relations file before any matching. Reads `../shared/data/intel/` (never copied).
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn data(name: &str) -> String {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/intel"))
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn qicp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(args)
+        .output()
+        .expect("runs qicp")
+}
+
+/// `qicp sweep` on the Intel log with q-wsm, the given extra arguments, JSON parsed.
+fn sweep_json(extra: &[&str]) -> (serde_json::Value, String) {
+    let (log, relations) = (data("intel.clf.bz2"), data("intel.relations"));
+    let mut args = vec![
+        "sweep",
+        &log,
+        "--matcher",
+        "q-wsm",
+        "--relations",
+        &relations,
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    let o = qicp(&args);
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(o.status.success(), "{stderr}");
+    let json = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    (json, stderr)
+}
+
+fn f(v: &serde_json::Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+const FIGURES: [&str; 9] = [
+    "trans_mean",
+    "trans_max",
+    "rot_mean_deg",
+    "ms_per_scan_median",
+    "map_points",
+    "scans",
+    "relations",
+    "relations_missing",
+    "relations_over_0_5_m",
+];
+
+#[test]
+fn sweep_reports_the_default_and_each_variant_with_consistent_ratios() {
+    let names = ["scans/2", "odom-noise", "icp.max_dist_start*0.7"];
+    let (report, stderr) = sweep_json(&["--scans", "3000", "--variants", &names.join(",")]);
+    for key in [
+        "log",
+        "matcher",
+        "scans",
+        "default",
+        "variants",
+        "worst_ratio",
+        "median_ratio",
+        "relations_over_0_5_m",
+    ] {
+        assert!(report.get(key).is_some(), "report lacks {key}: {report}");
+    }
+    assert_eq!(report["matcher"], "q-wsm");
+    assert_eq!(report["scans"], 3000);
+    let default = &report["default"];
+    for key in FIGURES {
+        assert!(default.get(key).is_some(), "default lacks {key}: {default}");
+    }
+    let base = f(&default["trans_mean"]);
+    assert!(base > 0.0 && base < 0.1, "default trans_mean {base}");
+    assert!(default["relations"].as_u64().unwrap_or(0) > 0);
+    assert_eq!(default["scans"], 3000);
+    assert_eq!(
+        report["relations_over_0_5_m"],
+        default["relations_over_0_5_m"]
+    );
+
+    let variants = report["variants"].as_array().expect("variants");
+    let listed: Vec<&str> = variants.iter().filter_map(|v| v["name"].as_str()).collect();
+    assert_eq!(listed, names);
+    let mut ratios = Vec::new();
+    for v in variants {
+        assert!(v.get("error").is_none(), "{v}");
+        for key in FIGURES.iter().chain(&["name", "ratio"]) {
+            assert!(v.get(key).is_some(), "variant lacks {key}: {v}");
+        }
+        let ratio = f(&v["ratio"]);
+        assert!((ratio - f(&v["trans_mean"]) / base).abs() < 1e-12, "{v}");
+        ratios.push(ratio);
+        let name = v["name"].as_str().unwrap_or_default();
+        assert!(
+            stderr.contains(&format!("variant {name} done in")),
+            "{stderr}"
+        );
+    }
+    assert_eq!(
+        variants[0]["scans"], 1500,
+        "scans/2 keeps every second record"
+    );
+    ratios.sort_by(f64::total_cmp);
+    assert_eq!(f(&report["worst_ratio"]), ratios[2]);
+    assert_eq!(f(&report["median_ratio"]), ratios[1]);
+    assert!(stderr.contains("variant default done in"), "{stderr}");
+}
+
+#[test]
+fn sweep_figures_do_not_depend_on_jobs() {
+    let args = [
+        "--scans",
+        "400",
+        "--variants",
+        "beams/2,odom-bias,range-noise,max-range-10",
+    ];
+    let strip = |mut report: serde_json::Value| {
+        // Wall times are the only figures that vary from run to run.
+        report["default"]["ms_per_scan_median"] = serde_json::Value::Null;
+        for v in report["variants"].as_array_mut().expect("variants") {
+            v["ms_per_scan_median"] = serde_json::Value::Null;
+        }
+        report
+    };
+    let one = strip(sweep_json(&[&args[..], &["--jobs", "1"]].concat()).0);
+    let three = strip(sweep_json(&[&args[..], &["--jobs", "3"]].concat()).0);
+    assert_eq!(one, three);
+    assert_eq!(one["variants"].as_array().map(Vec::len), Some(4));
+}
+
+#[test]
+fn sweep_reports_an_invalid_scaled_config_as_its_variants_error() {
+    let dir = std::env::temp_dir().join(format!("qicp-sweep-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let config = dir.join("close-gates.toml");
+    std::fs::write(
+        &config,
+        "[matcher]\nkind = \"q-wsm\"\n[matcher.icp]\nmax_dist_end = 0.8\n",
+    )
+    .expect("config written");
+    let (report, _) = sweep_json(&[
+        "--config",
+        config.to_str().expect("utf-8 path"),
+        "--scans",
+        "400",
+        "--variants",
+        "icp.max_dist_end*1.4,odom-bias",
+    ]);
+    let variants = report["variants"].as_array().expect("variants");
+    assert_eq!(variants.len(), 2);
+    let bad = &variants[1];
+    assert_eq!(bad["name"], "icp.max_dist_end*1.4");
+    let error = bad["error"].as_str().expect("an error");
+    assert!(error.contains("max_dist_end"), "{error}");
+    assert!(bad["ratio"].is_null(), "{bad}");
+    assert!(variants[0]["error"].is_null() && variants[0]["ratio"].is_number());
+}
+
+#[test]
+fn sweep_refuses_an_unknown_variant_before_reading_the_log() {
+    let relations = data("intel.relations");
+    let o = qicp(&[
+        "sweep",
+        "/nonexistent/log.clf",
+        "--matcher",
+        "q-wsm",
+        "--relations",
+        &relations,
+        "--variants",
+        "scans/2,scans/3",
+    ]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("unknown variant scans/3"), "{stderr}");
+    assert!(
+        stderr.contains("odom-noise") && stderr.contains("icp.max_dist_start*0.7"),
+        "the known variants are listed: {stderr}"
+    );
+}
+
+#[test]
+fn sweep_refuses_a_missing_relations_file_before_matching() {
+    let log = data("intel.clf.bz2");
+    let o = qicp(&[
+        "sweep",
+        &log,
+        "--matcher",
+        "q-wsm",
+        "--relations",
+        "/nonexistent/intel.relations",
+    ]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains("/nonexistent/intel.relations"),
+        "names the file: {stderr}"
+    );
+    assert!(!stderr.contains("done in"), "nothing was matched: {stderr}");
+}
+
+#[test]
+fn sweep_refuses_relations_of_another_time_span() {
+    let dir = std::env::temp_dir().join(format!("qicp-sweep-cli-rel-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let relations = dir.join("elsewhere.relations");
+    std::fs::write(&relations, "1.0 2.0 0.1 0 0 0 0 0\n").expect("relations written");
+    let log = data("intel.clf.bz2");
+    let o = qicp(&[
+        "sweep",
+        &log,
+        "--matcher",
+        "q-wsm",
+        "--relations",
+        relations.to_str().expect("utf-8 path"),
+        "--scans",
+        "100",
+    ]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("do they belong to this log"), "{stderr}");
+    assert!(!stderr.contains("done in"), "nothing was matched: {stderr}");
+}
