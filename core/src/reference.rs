@@ -195,6 +195,27 @@ impl<I: SpatialIndex> Reference<I> {
         self.scans
     }
 
+    /// The point of the reference surface through point `id` closest to `p`: the sample slid
+    /// along its tangent, at most one sample spacing either way (a polyline through the
+    /// samples). The sample itself where its normal is unknown.
+    #[must_use]
+    pub fn surface_foot(&self, id: crate::PointId, p: &Point2<f64>) -> Point2<f64> {
+        let c = self.index.points()[id as usize];
+        let info = &self.info[id as usize];
+        let tangent = Vector2::new(-info.normal.y, info.normal.x);
+        let slide = (p - c).dot(&tangent).clamp(-info.spacing, info.spacing);
+        c + tangent * slide
+    }
+
+    /// Distance from `p` to the reference surface through its nearest point, if that point
+    /// lies within `reach`.
+    #[must_use]
+    pub fn surface_distance(&self, p: &Point2<f64>, reach: f64) -> Option<f64> {
+        self.index
+            .nearest_within(p, reach * reach)
+            .map(|n| (self.surface_foot(n.id, p) - p).norm())
+    }
+
     /// Removes everything.
     pub fn clear(&mut self) {
         self.index.clear();

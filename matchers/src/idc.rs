@@ -124,20 +124,6 @@ impl IdcParams {
     }
 }
 
-/// The point of the reference surface through point `id` closest to `p`: the sample slid
-/// along its tangent, at most one sample spacing either way (a polyline through the samples).
-fn surface_foot<I: SpatialIndex>(
-    reference: &Reference<I>,
-    id: u32,
-    p: &Point2<f64>,
-) -> Point2<f64> {
-    let c = reference.index().points()[id as usize];
-    let info = &reference.info()[id as usize];
-    let tangent = qicp_core::Vector2::new(-info.normal.y, info.normal.x);
-    let slide = (p - c).dot(&tangent).clamp(-info.spacing, info.spacing);
-    c + tangent * slide
-}
-
 /// Incidence angles beyond acos of this (about 75°) count as 75° in the range rule's weights.
 const MIN_INCIDENCE_COS: f64 = 0.26;
 
@@ -341,7 +327,7 @@ impl<C: CorrespondenceMetric> Idc<C> {
         self.feet.clear();
         for p in &self.cp {
             let b = local[p.scan as usize];
-            let a = surface_foot(reference, p.reference, &pose.transform_point(&b));
+            let a = reference.surface_foot(p.reference, &pose.transform_point(&b));
             self.feet.push((a, b));
         }
         let by_cp = align_points(self.feet.iter().copied())?;
@@ -489,7 +475,7 @@ impl<C: CorrespondenceMetric> Idc<C> {
                     .index()
                     .nearest_within(&p, 4.0 * cap)
                     .map_or(cap, |n| {
-                        (surface_foot(reference, n.id, &p) - p)
+                        (reference.surface_foot(n.id, &p) - p)
                             .norm_squared()
                             .min(cap)
                     })
