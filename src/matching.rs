@@ -4,7 +4,7 @@
 use crate::logs::tum::{Stamped, write_tum};
 use anyhow::{Context, Result};
 use qicp_core::{Fallback, Record};
-use qicp_matchers::{Estimate, MatcherConfig, Odometry};
+use qicp_matchers::{Check, Estimate, MatcherConfig, Odometry};
 use serde::Serialize;
 use std::io::Write;
 use std::path::Path;
@@ -33,6 +33,9 @@ pub struct ScanRow {
     /// Why the scan fell back to odometry, if it did.
     #[serde(skip)]
     pub fallback: Option<Fallback>,
+    /// What the check before insertion said.
+    #[serde(skip)]
+    pub check: Check,
 }
 
 /// Summary of one matcher over one drive (`summary.json`).
@@ -62,6 +65,12 @@ pub struct MatchSummary {
     pub fallback_reasons: std::collections::BTreeMap<String, usize>,
     /// Scans that entered the reference.
     pub inserted: usize,
+    /// Matches that looked wrong, so the correlative search ran.
+    pub searched: usize,
+    /// … of which the search's start gave a better match, which replaced the first.
+    pub recovered: usize,
+    /// Matches that stayed poor and did not enter the reference.
+    pub refused: usize,
 }
 
 /// A matcher's whole run over a drive.
@@ -149,6 +158,7 @@ impl Matching {
             pose,
             result,
             inserted,
+            check,
         } = estimate;
         // A fallback has no residual or covariance of its own.
         let (residual_mm, certainty, sigma_mm) = if result.fallback.is_none() {
@@ -171,6 +181,7 @@ impl Matching {
             ms: elapsed.as_secs_f64() * 1e3,
             inserted,
             fallback: result.fallback,
+            check,
         });
         estimate
     }
@@ -187,6 +198,7 @@ impl Matching {
                 Fallback::TooFewCorrespondences { .. } => "too_few_correspondences",
                 Fallback::EmptyReference => "empty_reference",
                 Fallback::Degenerate => "degenerate",
+                Fallback::Refused => "refused",
             };
             *reasons.entry(key.to_string()).or_insert(0) += 1;
         }
@@ -203,6 +215,9 @@ impl Matching {
             fallbacks: rows.iter().filter(|r| r.fallback.is_some()).count(),
             fallback_reasons: reasons,
             inserted: rows.iter().filter(|r| r.inserted).count(),
+            searched: rows.iter().filter(|r| r.check.searched).count(),
+            recovered: rows.iter().filter(|r| r.check.recovered).count(),
+            refused: rows.iter().filter(|r| r.check.refused).count(),
         };
         MatchRun {
             trajectory: self.trajectory,
@@ -233,16 +248,27 @@ pub fn run_matcher(
     Ok(matching.finish())
 }
 
+/// The `check` column of `matches.csv`: `refused`, `recovered`, `searched` or empty.
+fn check_label(check: &Check) -> &'static str {
+    match (check.refused, check.recovered, check.searched) {
+        (true, _, _) => "refused",
+        (false, true, _) => "recovered",
+        (false, false, true) => "searched",
+        _ => "",
+    }
+}
+
 /// Writes `matches.csv`.
 pub fn write_rows<W: Write>(mut w: W, rows: &[ScanRow]) -> std::io::Result<()> {
     writeln!(
         w,
-        "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm"
+        "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm,\
+         inlier_share,check"
     )?;
     for r in rows {
         writeln!(
             w,
-            "{},{},{},{:.4},{:.6e},{:.4},{},{},{:.4}",
+            "{},{},{},{:.4},{:.6e},{:.4},{},{},{:.4},{:.4},{}",
             r.timestamp,
             r.iterations,
             r.correspondences,
@@ -251,7 +277,9 @@ pub fn write_rows<W: Write>(mut w: W, rows: &[ScanRow]) -> std::io::Result<()> {
             r.ms,
             u8::from(r.inserted),
             r.fallback.map(|f| f.to_string()).unwrap_or_default(),
-            r.sigma_mm
+            r.sigma_mm,
+            r.check.inlier_share,
+            check_label(&r.check),
         )?;
     }
     Ok(())

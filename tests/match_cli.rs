@@ -86,7 +86,7 @@ fn match_writes_every_output() {
     assert_eq!(
         csv.lines().next(),
         Some(
-            "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm"
+            "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm,inlier_share,check"
         )
     );
     assert_eq!(csv.lines().count(), 61);

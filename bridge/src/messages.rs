@@ -168,6 +168,8 @@ pub mod fallback_code {
     pub const EMPTY_REFERENCE: u32 = 3;
     /// Degenerate least-squares system.
     pub const DEGENERATE: u32 = 4;
+    /// The match was refused by validation; the pose is the prediction.
+    pub const REFUSED: u32 = 5;
 }
 
 /// One pose estimate of the matcher (160 bytes), the payload of `<prefix>/pose`
@@ -244,6 +246,7 @@ impl PoseMessage {
                 }
                 Some(Fallback::EmptyReference) => fallback_code::EMPTY_REFERENCE,
                 Some(Fallback::Degenerate) => fallback_code::DEGENERATE,
+                Some(Fallback::Refused) => fallback_code::REFUSED,
             },
             inserted: u32::from(inserted),
             iterations: result.iterations,

@@ -21,6 +21,9 @@ pub enum Fallback {
     EmptyReference,
     /// The least-squares system was singular or produced a non-finite step.
     Degenerate,
+    /// The match explained the scan worse than the recent level and worse than the initial
+    /// guess, so the guess stands (see the matchers' validation).
+    Refused,
 }
 
 impl std::fmt::Display for Fallback {
@@ -32,6 +35,7 @@ impl std::fmt::Display for Fallback {
             }
             Fallback::EmptyReference => write!(f, "empty reference"),
             Fallback::Degenerate => write!(f, "degenerate least-squares system"),
+            Fallback::Refused => write!(f, "match refused by validation"),
         }
     }
 }

@@ -13,9 +13,11 @@
 //! Unknown keys, values out of range and sections the chosen kind does not use are refused
 //! with a message naming the key.
 
+use crate::correlative::CorrelativeParams;
 use crate::icp::IcpParams;
 use crate::idc::{Idc, IdcParams};
 use crate::pipeline::{MotionModel, Odometry, Pipeline, Policy, Relevance};
+use crate::validation::ValidationParams;
 use crate::wsm::{Wsm, WsmParams};
 use qicp_core::{KdTree, MutualNearest, QuadTree};
 use serde::{Deserialize, Serialize};
@@ -157,6 +159,12 @@ pub struct MatcherConfig {
     /// How far odometry is trusted (the prior of weighted matchers).
     #[serde(default)]
     pub motion: MotionModel,
+    /// How a match is checked before it enters the reference.
+    #[serde(default)]
+    pub validation: ValidationParams,
+    /// The correlative search that re-matches a suspect scan.
+    #[serde(default)]
+    pub correlative: CorrelativeParams,
 }
 
 impl MatcherConfig {
@@ -170,6 +178,8 @@ impl MatcherConfig {
             wsm: None,
             relevance: Relevance::default(),
             motion: MotionModel::default(),
+            validation: ValidationParams::default(),
+            correlative: CorrelativeParams::default(),
         };
         c.fill_defaults();
         c
@@ -220,6 +230,8 @@ impl MatcherConfig {
         }
         self.relevance.validate()?;
         self.motion.validate()?;
+        self.validation.validate()?;
+        self.correlative.validate()?;
         Ok(())
     }
 
@@ -247,29 +259,36 @@ impl MatcherConfig {
         let incremental = Policy::Incremental(c.relevance);
         let noise = wsm.noise();
         let name = c.kind.name();
-        let motion = c.motion;
+        // What goes around the matcher: the odometry prior and the checks before insertion.
+        let around = (c.motion, c.validation, c.correlative);
         // One line per kind: the matcher, its reference index and its policy.
-        fn boxed<M, I>(p: Pipeline<M, I>, motion: MotionModel) -> Box<dyn Odometry>
+        fn boxed<M, I>(
+            p: Pipeline<M, I>,
+            (motion, validation, correlative): (MotionModel, ValidationParams, CorrelativeParams),
+        ) -> Box<dyn Odometry>
         where
             Pipeline<M, I>: Odometry + 'static,
             M: qicp_core::ScanMatcher,
             I: qicp_core::SpatialIndex,
         {
-            Box::new(p.with_motion_model(motion))
+            Box::new(
+                p.with_motion_model(motion)
+                    .with_validation(validation, correlative),
+            )
         }
         Ok(match c.kind {
             MatcherKind::Idc => {
                 let m = Idc::<MutualNearest<QuadTree>>::new(icp, idc);
                 boxed(
                     Pipeline::new(name, m, QuadTree::default(), incremental, noise),
-                    motion,
+                    around,
                 )
             }
             MatcherKind::Wsm => {
                 let m = Wsm::<MutualNearest<QuadTree>>::new(icp, wsm);
                 boxed(
                     Pipeline::new(name, m, QuadTree::default(), incremental, noise),
-                    motion,
+                    around,
                 )
             }
             MatcherKind::QIdc => boxed(
@@ -280,7 +299,7 @@ impl MatcherConfig {
                     boosted,
                     noise,
                 ),
-                motion,
+                around,
             ),
             MatcherKind::QWsm => boxed(
                 QWsm::new(
@@ -290,15 +309,15 @@ impl MatcherConfig {
                     boosted,
                     noise,
                 ),
-                motion,
+                around,
             ),
             MatcherKind::KdIdc => boxed(
                 KdIdc::new(name, Idc::new(icp, idc), KdTree::default(), boosted, noise),
-                motion,
+                around,
             ),
             MatcherKind::KdWsm => boxed(
                 KdWsm::new(name, Wsm::new(icp, wsm), KdTree::default(), boosted, noise),
-                motion,
+                around,
             ),
         })
     }
@@ -312,3 +331,90 @@ pub type QWsm = Pipeline<Wsm<MutualNearest<QuadTree>>, QuadTree>;
 pub type KdIdc = Pipeline<Idc<MutualNearest<KdTree>>, KdTree>;
 /// KD-WSM: WSM against a kd-tree map.
 pub type KdWsm = Pipeline<Wsm<MutualNearest<KdTree>>, KdTree>;
+
+/// The numeric parameters that steer matching and map building, by kind family: the ones a
+/// robustness sweep perturbs (`qicp sweep`). Keys are dotted paths below `[matcher]`.
+const STEERING_COMMON: &[&str] = &[
+    "icp.max_dist_start",
+    "icp.max_dist_end",
+    "relevance.tau_max",
+    "relevance.rho_max_deg",
+    "relevance.map_resolution",
+    "motion.sigma_xy_per_m",
+    "motion.sigma_theta_per_m_deg",
+    "validation.inlier_distance",
+    "validation.max_share_drop",
+    "correlative.window_xy",
+    "correlative.window_deg",
+];
+const STEERING_WSM: &[&str] = &["wsm.sigma_range", "wsm.sigma_slide"];
+const STEERING_IDC: &[&str] = &[
+    "idc.window_start_deg",
+    "idc.window_sigmas",
+    "idc.gate_sigmas",
+];
+
+impl MatcherConfig {
+    /// The numeric parameters that steer this kind's matching and map building (correspondence
+    /// distances, relevance thresholds, the map's density bound, the noise and motion models),
+    /// as dotted keys such as `"matcher.icp.max_dist_start"`. Parameters whose value is 0 are
+    /// left out: scaling them changes nothing.
+    #[must_use]
+    pub fn steering_parameters(&self) -> Vec<String> {
+        let family = if self.kind.is_idc() {
+            STEERING_IDC
+        } else {
+            STEERING_WSM
+        };
+        STEERING_COMMON
+            .iter()
+            .chain(family)
+            .map(|k| format!("matcher.{k}"))
+            .filter(|k| self.parameter(k).is_some_and(|v| v != 0.0))
+            .collect()
+    }
+
+    fn effective_value(&self) -> Result<toml::Value, ConfigError> {
+        let mut c = self.clone();
+        c.fill_defaults();
+        toml::Value::try_from(&c).map_err(|e| ConfigError::Parse(e.to_string()))
+    }
+
+    /// The value of a numeric parameter given as a dotted key (`"matcher.wsm.sigma_slide"`),
+    /// defaults filled in; `None` if the key names no number.
+    #[must_use]
+    pub fn parameter(&self, key: &str) -> Option<f64> {
+        let value = self.effective_value().ok()?;
+        let mut at = &value;
+        for part in key.strip_prefix("matcher.")?.split('.') {
+            at = at.get(part)?;
+        }
+        match at {
+            toml::Value::Float(v) => Some(*v),
+            toml::Value::Integer(v) => Some(*v as f64),
+            _ => None,
+        }
+    }
+
+    /// This config with the numeric parameter `key` (a dotted key, as
+    /// [`steering_parameters`](Self::steering_parameters) gives) multiplied by `factor`,
+    /// validated. Integers are rounded to the nearest whole number.
+    pub fn scaled(&self, key: &str, factor: f64) -> Result<Self, ConfigError> {
+        let unknown = || ConfigError::invalid(key, "is not a numeric matcher parameter");
+        let mut value = self.effective_value()?;
+        let mut at = &mut value;
+        for part in key.strip_prefix("matcher.").ok_or_else(unknown)?.split('.') {
+            at = at.get_mut(part).ok_or_else(unknown)?;
+        }
+        *at = match *at {
+            toml::Value::Float(v) => toml::Value::Float(v * factor),
+            toml::Value::Integer(v) => toml::Value::Integer((v as f64 * factor).round() as i64),
+            _ => return Err(unknown()),
+        };
+        let c: MatcherConfig = value
+            .try_into()
+            .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
+        c.validate()?;
+        Ok(c)
+    }
+}

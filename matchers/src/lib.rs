@@ -12,14 +12,18 @@
 #![warn(missing_docs)]
 
 pub mod config;
+pub mod correlative;
 pub mod icp;
 pub mod idc;
 pub mod lsq;
 pub mod pipeline;
+pub mod validation;
 pub mod wsm;
 
 pub use config::{ConfigError, KdIdc, KdWsm, MatcherConfig, MatcherKind, QIdc, QWsm};
+pub use correlative::{Candidate, CorrelativeParams, CorrelativeSearch};
 pub use icp::IcpParams;
 pub use idc::{Idc, IdcParams};
 pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance};
+pub use validation::{Check, ValidationParams, Validator};
 pub use wsm::{Wsm, WsmParams};

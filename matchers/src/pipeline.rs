@@ -2,7 +2,9 @@
 //! the previous scan; boosted (paper Alg. 1) keeps a map of every relevant scan.
 
 use crate::ConfigError;
+use crate::correlative::{CorrelativeParams, CorrelativeSearch};
 use crate::icp::non_negative;
+use crate::validation::{Check, ValidationParams, Validator};
 use qicp_core::{
     Fallback, LaserNoise, MatchResult, Matrix3, Point2, Pose2, Record, Reference, ScanMatcher,
     SpatialIndex,
@@ -141,6 +143,8 @@ pub struct Estimate {
     pub result: MatchResult,
     /// Whether the scan entered the reference.
     pub inserted: bool,
+    /// What the check before insertion said ([`crate::validation`]).
+    pub check: Check,
 }
 
 /// A laser-odometry pipeline: feed records in time order, get robot poses.
@@ -179,6 +183,9 @@ pub struct Pipeline<M, I> {
     last: Option<(Pose2, Pose2)>,
     /// Laser pose of the last scan inserted into the map.
     last_inserted: Option<Pose2>,
+    /// The check before insertion, and its search.
+    validator: Validator,
+    search: CorrelativeSearch,
 }
 
 impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
@@ -203,7 +210,21 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             reference_frame: Pose2::IDENTITY,
             last: None,
             last_inserted: None,
+            validator: Validator::new(ValidationParams::default()),
+            search: CorrelativeSearch::new(CorrelativeParams::default()),
         }
+    }
+
+    /// Checks matches as `validation` says, searching with `correlative` where they look wrong.
+    #[must_use]
+    pub fn with_validation(
+        mut self,
+        validation: ValidationParams,
+        correlative: CorrelativeParams,
+    ) -> Self {
+        self.validator = Validator::new(validation);
+        self.search = CorrelativeSearch::new(correlative);
+        self
     }
 
     /// Uses `motion` as the prior of every match.
@@ -216,6 +237,66 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// The reference (map or previous scan).
     pub fn reference(&self) -> &Reference<I> {
         &self.reference
+    }
+
+    /// Matches `scan` from `guess` and checks the match before it may enter the reference: a
+    /// suspect match is searched again from the best pose of a correlative search around the
+    /// prediction, and one that stays poor is refused (see [`crate::validation`]).
+    fn match_checked(
+        &mut self,
+        scan: &qicp_core::Scan,
+        guess: Pose2,
+        prior: Option<Matrix3<f64>>,
+    ) -> (MatchResult, Check) {
+        let mut result = self
+            .matcher
+            .match_with_prior(&self.reference, scan, guess, prior);
+        if !self.validator.params.enabled {
+            return (result, Check::UNCHECKED);
+        }
+        let local = scan.points();
+        let threshold = self.validator.threshold();
+        let mut share = match result.fallback {
+            None => self
+                .validator
+                .inlier_share(&self.reference, local, &result.pose),
+            // Nothing within the gate: odometry may be far off, or the scan sees new ground.
+            Some(Fallback::TooFewCorrespondences { .. }) => 0.0,
+            Some(_) => return (result, Check::UNCHECKED),
+        };
+        let mut check = Check::UNCHECKED;
+        if self.validator.params.search && threshold.is_some_and(|t| share < t) {
+            check.searched = true;
+            if let Some(start) = self.search.search(&self.reference, local, &guess) {
+                let again = self
+                    .matcher
+                    .match_with_prior(&self.reference, scan, start.pose, prior);
+                if again.fallback.is_none() {
+                    let s = self
+                        .validator
+                        .inlier_share(&self.reference, local, &again.pose);
+                    // Only a match that passes the check replaces the first: one poor
+                    // match is not traded for another (an aliased corridor, a lone scan).
+                    if s > share && threshold.is_some_and(|t| s >= t) {
+                        result = again;
+                        share = s;
+                        check.recovered = true;
+                    }
+                }
+            }
+        }
+        if result.fallback.is_none() {
+            self.validator.record(share);
+            check.inlier_share = share;
+            check.refused = threshold.is_some_and(|t| share < t);
+            if check.refused && self.validator.inlier_share(&self.reference, local, &guess) >= share
+            {
+                // The prediction explains the scan at least as well: the match went astray,
+                // and the next prediction must not start from it.
+                result = MatchResult::fallback(guess, Fallback::Refused);
+            }
+        }
+        (result, check)
     }
 
     fn update_reference(&mut self, record: &Record, laser: &Pose2, result: &MatchResult) -> bool {
@@ -291,16 +372,18 @@ where
         let guess = self.reference_frame.between(&predicted);
         // The prior's x-y block is isotropic, so it holds in the reference frame unrotated.
         let prior = self.motion.information(&step);
-        let result = self
-            .matcher
-            .match_with_prior(&self.reference, &record.scan, guess, prior);
+        let (result, check) = self.match_checked(&record.scan, guess, prior);
         let laser = self.reference_frame * result.pose;
-        let inserted = self.update_reference(record, &laser, &result);
+        // A refused match stays out of a map. A scan-to-scan reference is replaced all the
+        // same: there is no map to protect, and an older reference overlaps less.
+        let protect = matches!(self.policy, Policy::Boosted(_)) && check.refused;
+        let inserted = !protect && self.update_reference(record, &laser, &result);
         self.last = Some((record.odometry, laser));
         Estimate {
             pose: laser * offset.inverse(),
             result,
             inserted,
+            check,
         }
     }
 

@@ -138,3 +138,32 @@ fn idc_first_gate_follows_the_prior() {
     };
     assert_eq!(off.first_level(&icp, Some(&information(0.01))), 0);
 }
+
+#[test]
+fn steering_parameters_scale_one_at_a_time() {
+    for kind in MatcherKind::ALL {
+        let base = MatcherConfig::defaults(kind);
+        let keys = base.steering_parameters();
+        assert!(keys.contains(&"matcher.icp.max_dist_start".to_string()));
+        assert!(keys.contains(&"matcher.relevance.tau_max".to_string()));
+        for key in &keys {
+            let v = base
+                .parameter(key)
+                .expect("a steering parameter is a number");
+            assert!(
+                v != 0.0,
+                "{kind}: {key} is 0 and scaling it would change nothing"
+            );
+            let scaled = base.scaled(key, 1.4).expect("×1.4 is valid");
+            assert!((scaled.parameter(key).unwrap() - v * 1.4).abs() < 1e-12);
+            // Nothing else moved.
+            for other in keys.iter().filter(|k| *k != key) {
+                assert_eq!(scaled.parameter(other), base.parameter(other), "{other}");
+            }
+        }
+    }
+    let err = MatcherConfig::defaults(MatcherKind::QWsm)
+        .scaled("matcher.icp.nope", 2.0)
+        .unwrap_err();
+    assert!(err.to_string().contains("matcher.icp.nope"));
+}

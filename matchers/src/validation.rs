@@ -1,0 +1,205 @@
+//! Checking a match before it enters the reference. Paper Alg. 1 inserts every relevant scan
+//! into a map that is never forgotten, so one wrong match (odometry out by decimetres, a
+//! symmetric room, a local minimum) would be copied into the map and every later scan
+//! matched against the turned copy. CSM reports `valid` rather than trusting every result;
+//! here a match is judged by the share of its points the reference explains, against the
+//! running level of recent scans (a share that is low everywhere in a cluttered park is
+//! normal there, and a drop against the level is what marks a wrong match):
+//!
+//! 1. a match whose share falls more than `max_share_drop` below the running median share
+//!    (as a fraction of it) is suspect;
+//! 2. a suspect match is searched again: a correlative search over a window around the
+//!    prediction ([`crate::correlative`]) gives ICP a new start, and the better of the two
+//!    results is kept;
+//! 3. a match still below the level does not enter the map; where the prediction explains
+//!    the scan at least as well, the prediction is reported instead (a
+//!    [`Fallback::Refused`](qicp_core::Fallback::Refused)), so the next prediction does not
+//!    start from a match that went astray.
+
+use crate::ConfigError;
+use crate::icp::positive;
+use qicp_core::{Point2, Pose2, Reference, SpatialIndex};
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+/// How matches are checked (TOML section `[matcher.validation]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValidationParams {
+    /// Check matches at all; false runs the paper's plain Alg. 1 (every relevant scan enters
+    /// the map, no search). Default true.
+    pub enabled: bool,
+    /// A scan point is explained when the reference surface lies within this distance of it
+    /// (m). Default 0.1: several times a laser's range noise, well below a wrong match's
+    /// offsets.
+    pub inlier_distance: f64,
+    /// A match is suspect, and a search runs, when its share of explained points falls more
+    /// than this fraction below the running median share of recent scans. Default 0.25.
+    pub max_share_drop: f64,
+    /// Checked scans in the running median. Default 25.
+    pub history: usize,
+    /// Run the correlative search on suspect matches. Default true.
+    pub search: bool,
+}
+
+impl Default for ValidationParams {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            inlier_distance: 0.1,
+            max_share_drop: 0.25,
+            history: 25,
+            search: true,
+        }
+    }
+}
+
+/// The running median needs this many scans before it judges any.
+const MIN_HISTORY: usize = 5;
+
+impl ValidationParams {
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("matcher.validation.inlier_distance", self.inlier_distance)?;
+        if !(self.max_share_drop.is_finite() && (0.0..=1.0).contains(&self.max_share_drop)) {
+            return Err(ConfigError::invalid(
+                "matcher.validation.max_share_drop",
+                format!("{} must be in [0, 1]", self.max_share_drop),
+            ));
+        }
+        if !(MIN_HISTORY..=10_000).contains(&self.history) {
+            return Err(ConfigError::invalid(
+                "matcher.validation.history",
+                format!("{} must be in {MIN_HISTORY}..=10000", self.history),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What the check said of one match.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Check {
+    /// Share of the scan's points the reference explains at the estimate; NaN when the
+    /// match was not checked.
+    pub inlier_share: f64,
+    /// The match looked wrong and the correlative search ran.
+    pub searched: bool,
+    /// The search's start led to a better match, which replaced the first.
+    pub recovered: bool,
+    /// The match stayed below the running level: it does not enter a map (a scan-to-scan
+    /// reference is replaced all the same), and where the prediction explains the scan at
+    /// least as well, the prediction stands.
+    pub refused: bool,
+}
+
+impl Check {
+    /// A match that was not checked.
+    pub const UNCHECKED: Check = Check {
+        inlier_share: f64::NAN,
+        searched: false,
+        recovered: false,
+        refused: false,
+    };
+}
+
+/// The running level of explained shares, and the judge of each new one.
+#[derive(Debug, Clone, Default)]
+pub struct Validator {
+    /// The parameters.
+    pub params: ValidationParams,
+    recent: VecDeque<f64>,
+    sorted: Vec<f64>,
+}
+
+impl Validator {
+    /// A validator with no history.
+    #[must_use]
+    pub fn new(params: ValidationParams) -> Self {
+        Self {
+            params,
+            recent: VecDeque::with_capacity(params.history),
+            sorted: Vec::with_capacity(params.history),
+        }
+    }
+
+    /// Share of `local` (scan points, laser frame) within `inlier_distance` of the reference
+    /// surface when the scan sits at `pose`.
+    #[must_use]
+    pub fn inlier_share<I: SpatialIndex>(
+        &self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+    ) -> f64 {
+        if local.is_empty() {
+            return 0.0;
+        }
+        let d = self.params.inlier_distance;
+        let explained = local
+            .iter()
+            .filter(|q| {
+                reference
+                    .surface_distance(&pose.transform_point(q), 2.0 * d)
+                    .is_some_and(|e| e <= d)
+            })
+            .count();
+        explained as f64 / local.len() as f64
+    }
+
+    /// The share below which a match is poor; `None` while the history is too short to tell.
+    #[must_use]
+    pub fn threshold(&mut self) -> Option<f64> {
+        if self.recent.len() < MIN_HISTORY {
+            return None;
+        }
+        self.sorted.clear();
+        self.sorted.extend(self.recent.iter().copied());
+        let mid = self.sorted.len() / 2;
+        let median = *self.sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
+        Some((1.0 - self.params.max_share_drop) * median)
+    }
+
+    /// Adds a checked share to the running level. Every checked scan counts, refused or not:
+    /// a robot entering a new room sees less of the map for a while, and the level follows.
+    pub fn record(&mut self, share: f64) {
+        if !share.is_finite() {
+            return;
+        }
+        if self.recent.len() == self.params.history {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(share);
+    }
+
+    /// Forgets the history (a new drive).
+    pub fn clear(&mut self) {
+        self.recent.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_level_follows_the_median_of_recent_shares() {
+        let mut v = Validator::new(ValidationParams {
+            history: 5,
+            ..ValidationParams::default()
+        });
+        for s in [0.9, 0.8, 0.9, 0.85] {
+            v.record(s);
+            assert_eq!(v.threshold(), None, "too few scans to judge");
+        }
+        v.record(0.1);
+        assert!((v.threshold().unwrap() - 0.75 * 0.85).abs() < 1e-12);
+        for _ in 0..5 {
+            v.record(0.3);
+        }
+        assert!(
+            (v.threshold().unwrap() - 0.75 * 0.3).abs() < 1e-12,
+            "the old level is forgotten"
+        );
+    }
+}
