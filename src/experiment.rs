@@ -538,6 +538,9 @@ impl MatcherOutcome {
             ("fallbacks", json!(s.fallbacks)),
             ("fallback_reasons", json!(s.fallback_reasons)),
             ("inserted", json!(s.inserted)),
+            ("searched", json!(s.searched)),
+            ("recovered", json!(s.recovered)),
+            ("refused", json!(s.refused)),
             ("matching_seconds", json!(s.wall_seconds)),
         ] {
             m.insert(k.into(), v);

@@ -22,12 +22,17 @@ fn qicp(args: &[&str]) -> Output {
 
 /// `qicp sweep` on the Intel log with q-wsm, the given extra arguments, JSON parsed.
 fn sweep_json(extra: &[&str]) -> (serde_json::Value, String) {
+    sweep_kind_json("q-wsm", extra)
+}
+
+/// `qicp sweep` on the Intel log with `kind`, the given extra arguments, JSON parsed.
+fn sweep_kind_json(kind: &str, extra: &[&str]) -> (serde_json::Value, String) {
     let (log, relations) = (data("intel.clf.bz2"), data("intel.relations"));
     let mut args = vec![
         "sweep",
         &log,
         "--matcher",
-        "q-wsm",
+        kind,
         "--relations",
         &relations,
         "--json",
@@ -228,4 +233,34 @@ fn sweep_refuses_relations_of_another_time_span() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(stderr.contains("do they belong to this log"), "{stderr}");
     assert!(!stderr.contains("done in"), "nothing was matched: {stderr}");
+}
+
+/// Issue 12's robustness bounds, on the first 3,000 Intel scans where they hold for these
+/// variants (the whole log's sweep is in the README): every variant within
+/// max(2 × default, 5 cm), the median ratio at most 1.3, no relation of the default run
+/// above 0.5 m. Each list mixes input and parameter variants.
+#[test]
+fn sweep_bounds_hold_on_the_first_3000_intel_scans() {
+    for (kind, names) in [
+        (
+            "q-wsm",
+            "scans/2,odom-noise,max-range-10,relevance.tau_max*0.7,wsm.sigma_slide*0.7",
+        ),
+        (
+            "q-idc",
+            "scans/2,odom-noise,icp.max_dist_start*0.7,motion.sigma_xy_per_m*0.7,\
+             relevance.map_resolution*1.4",
+        ),
+    ] {
+        let (report, _) = sweep_kind_json(kind, &["--scans", "3000", "--variants", names]);
+        let base = f(&report["default"]["trans_mean"]);
+        assert!(base < 0.05, "{kind}: default {base}");
+        assert_eq!(report["relations_over_0_5_m"], 0, "{kind}: {report}");
+        let bound = (2.0 * base).max(0.05);
+        for v in report["variants"].as_array().expect("variants") {
+            let t = f(&v["trans_mean"]);
+            assert!(t <= bound, "{kind} {}: {t} m over {bound} m", v["name"]);
+        }
+        assert!(f(&report["median_ratio"]) <= 1.3, "{kind}: {report}");
+    }
 }

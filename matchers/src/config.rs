@@ -201,7 +201,13 @@ impl MatcherConfig {
 
     /// Fills every section the kind uses with defaults where absent: the effective config.
     pub fn fill_defaults(&mut self) {
-        let resolution = if self.kind.is_idc() { 0.02 } else { 0.0 };
+        // WSM: the laser's range noise, below which a new point adds no geometry.
+        let resolution = if self.kind.is_idc() {
+            0.02
+        } else {
+            self.wsm
+                .map_or(WsmParams::default().sigma_range, |w| w.sigma_range)
+        };
         self.relevance.map_resolution.get_or_insert(resolution);
         if self.kind.is_idc() {
             self.idc.get_or_insert_with(IdcParams::default);

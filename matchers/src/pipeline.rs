@@ -23,11 +23,12 @@ pub struct Relevance {
     pub tau_max: f64,
     /// … or turned more than this (ρmax, deg). Default 5.
     pub rho_max_deg: f64,
-    /// Boosted maps skip a new point closer than this to one they hold (m); 0 inserts every
-    /// point, as Alg. 1 reads. Default: 0 for WSM kinds; 0.02 for IDC kinds, whose range
-    /// rule's radius queries grow with the map's density (40 ms/scan on a corridor map
-    /// without it). On the Intel log q-wsm scores 0.023 m at 0, 0.25 m at 0.005 and 0.17 m
-    /// at 0.02: a single bad match can corrupt a map that is never forgotten.
+    /// Boosted maps skip a new point closer than this to one they hold (m): the bound on the
+    /// map's density, so that memory and per-scan time grow with the area explored, not with
+    /// time. 0 inserts every point, as Alg. 1 reads (693k points on the Intel log).
+    /// Default: for WSM kinds the laser's range noise `matcher.wsm.sigma_range` (0.01), below
+    /// which a new point adds no geometry; 0.02 for IDC kinds, whose range rule's radius
+    /// queries grow with the map's density (40 ms/scan on a corridor map without it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub map_resolution: Option<f64>,
 }
@@ -288,7 +289,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         if result.fallback.is_none() {
             self.validator.record(share);
             check.inlier_share = share;
-            check.refused = threshold.is_some_and(|t| share < t);
+            check.refused = self.validator.refuse(share, threshold);
             if check.refused && self.validator.inlier_share(&self.reference, local, &guess) >= share
             {
                 // The prediction explains the scan at least as well: the match went astray,

@@ -40,6 +40,10 @@ pub struct ValidationParams {
     pub history: usize,
     /// Run the correlative search on suspect matches. Default true.
     pub search: bool,
+    /// After this many refusals in a row the running level starts afresh: a run of poor
+    /// matches is a change of scene (new ground, a crowd), not one wrong match, and the map
+    /// must grow into it. Default 3.
+    pub max_refusals: usize,
 }
 
 impl Default for ValidationParams {
@@ -50,6 +54,7 @@ impl Default for ValidationParams {
             max_share_drop: 0.25,
             history: 25,
             search: true,
+            max_refusals: 3,
         }
     }
 }
@@ -71,6 +76,12 @@ impl ValidationParams {
             return Err(ConfigError::invalid(
                 "matcher.validation.history",
                 format!("{} must be in {MIN_HISTORY}..=10000", self.history),
+            ));
+        }
+        if self.max_refusals == 0 {
+            return Err(ConfigError::invalid(
+                "matcher.validation.max_refusals",
+                "must be at least 1",
             ));
         }
         Ok(())
@@ -110,6 +121,7 @@ pub struct Validator {
     pub params: ValidationParams,
     recent: VecDeque<f64>,
     sorted: Vec<f64>,
+    refusals: usize,
 }
 
 impl Validator {
@@ -120,6 +132,7 @@ impl Validator {
             params,
             recent: VecDeque::with_capacity(params.history),
             sorted: Vec::with_capacity(params.history),
+            refusals: 0,
         }
     }
 
@@ -172,9 +185,22 @@ impl Validator {
         self.recent.push_back(share);
     }
 
-    /// Forgets the history (a new drive).
+    /// Judges a recorded share against the level it was checked with: true when it is
+    /// refused. The `max_refusals`-th refusal in a row clears the history, so the scene the
+    /// robot has entered sets the next level.
+    pub fn refuse(&mut self, share: f64, threshold: Option<f64>) -> bool {
+        let refused = threshold.is_some_and(|t| share < t);
+        self.refusals = if refused { self.refusals + 1 } else { 0 };
+        if self.refusals >= self.params.max_refusals {
+            self.clear();
+        }
+        refused
+    }
+
+    /// Forgets the history (a new drive, a new scene).
     pub fn clear(&mut self) {
         self.recent.clear();
+        self.refusals = 0;
     }
 }
 
@@ -201,5 +227,24 @@ mod tests {
             (v.threshold().unwrap() - 0.75 * 0.3).abs() < 1e-12,
             "the old level is forgotten"
         );
+    }
+
+    #[test]
+    fn a_run_of_refusals_starts_a_new_level() {
+        let mut v = Validator::new(ValidationParams::default());
+        for _ in 0..10 {
+            v.record(0.95);
+        }
+        let t = v.threshold();
+        assert!(!v.refuse(0.9, t));
+        assert!(v.refuse(0.5, t));
+        assert!(!v.refuse(0.9, t), "an accepted match ends the run");
+        assert!(v.refuse(0.5, t) && v.refuse(0.5, t));
+        assert!(
+            v.threshold().is_some(),
+            "two refusals in a row keep the level"
+        );
+        assert!(v.refuse(0.5, t));
+        assert_eq!(v.threshold(), None, "the third starts afresh");
     }
 }

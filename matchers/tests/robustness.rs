@@ -223,3 +223,76 @@ fn idc_is_checked_the_same_way() {
         }
     }
 }
+
+/// The laser pose at step `k` of a loop of 40 steps, radius 2 m, in the room.
+fn on_loop(k: usize) -> Pose2 {
+    let a = std::f64::consts::TAU * (k % 40) as f64 / 40.0;
+    Pose2::new(
+        0.5 + 2.0 * a.cos(),
+        -0.5 + 2.0 * a.sin(),
+        a + std::f64::consts::FRAC_PI_2,
+    )
+}
+
+#[test]
+fn the_map_stays_under_its_density_cap_over_ten_loops() {
+    let world = SyntheticWorld::room();
+    for kind in [MatcherKind::QWsm, MatcherKind::QIdc] {
+        let mut config = MatcherConfig::defaults(kind);
+        let cap = 0.02;
+        config.relevance.map_resolution = Some(cap);
+        let mut pipeline = config.build().expect("builds");
+        let mut after_loop = Vec::new();
+        for k in 0..400 {
+            let truth = on_loop(k);
+            let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
+            scan.timestamp = k as f64;
+            let e = pipeline.process(&Record {
+                scan,
+                odometry: truth,
+                truth: Some(truth),
+                laser_offset: Pose2::IDENTITY,
+            });
+            assert!(e.pose.distance(&truth) < 0.05, "{kind} step {k}: {e:?}");
+            if k % 40 == 39 {
+                after_loop.push(pipeline.reference_points().len());
+            }
+        }
+        let (first, last) = (after_loop[0], after_loop[9]);
+        assert!(
+            last as f64 <= 1.5 * first as f64,
+            "{kind}: {first} points after one loop, {last} after ten ({after_loop:?})"
+        );
+        // The cap itself: no two map points closer than the resolution (brute force).
+        let points = pipeline.reference_points();
+        for (i, p) in points.iter().enumerate() {
+            for q in &points[i + 1..] {
+                assert!(
+                    (p - q).norm() >= cap,
+                    "{kind}: {p} and {q} closer than {cap}"
+                );
+            }
+        }
+        println!("{kind}: map points after each loop {after_loop:?}");
+    }
+    // Without the cap the map grows with every loop.
+    let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
+    config.relevance.map_resolution = Some(0.0);
+    let mut pipeline = config.build().expect("builds");
+    let mut sizes = Vec::new();
+    for k in 0..120 {
+        let truth = on_loop(k);
+        let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
+        scan.timestamp = k as f64;
+        pipeline.process(&Record {
+            scan,
+            odometry: truth,
+            truth: Some(truth),
+            laser_offset: Pose2::IDENTITY,
+        });
+        if k % 40 == 39 {
+            sizes.push(pipeline.reference_points().len());
+        }
+    }
+    assert!(sizes[2] as f64 > 2.5 * sizes[0] as f64, "{sizes:?}");
+}
