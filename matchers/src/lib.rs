@@ -8,6 +8,9 @@
 //!   or boosted against a map of every relevant scan ([`Policy::Boosted`], paper Alg. 1) with
 //!   mutual-nearest correspondences (paper Alg. 2). The named compositions are type aliases:
 //!   [`QIdc`], [`QWsm`], [`KdIdc`], [`KdWsm`];
+//! - around Alg. 1, each switchable: [`Validator`] checks a match before it enters the map
+//!   ([`validation`]), and [`CorrelativeSearch`] (Olson 2009) re-matches a suspect scan from the
+//!   best pose of a window around the prediction ([`correlative`]);
 //! - [`MatcherConfig`]: the TOML registry that builds any of them as `Box<dyn Odometry>`.
 #![warn(missing_docs)]
 

@@ -4,7 +4,7 @@
 use crate::ConfigError;
 use crate::correlative::{CorrelativeParams, CorrelativeSearch};
 use crate::icp::non_negative;
-use crate::validation::{Check, ValidationParams, Validator};
+use crate::validation::{Check, ValidationParams, Validator, is_poor};
 use qicp_core::{
     Fallback, LaserNoise, MatchResult, Matrix3, Point2, Pose2, Record, Reference, ScanMatcher,
     SpatialIndex,
@@ -266,7 +266,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             Some(_) => return (result, Check::UNCHECKED),
         };
         let mut check = Check::UNCHECKED;
-        if self.validator.params.search && threshold.is_some_and(|t| share < t) {
+        if self.validator.params.search && is_poor(share, threshold) {
             check.searched = true;
             if let Some(start) = self.search.search(&self.reference, local, &guess) {
                 let again = self
@@ -278,7 +278,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                         .inlier_share(&self.reference, local, &again.pose);
                     // Only a match that passes the check replaces the first: one poor
                     // match is not traded for another (an aliased corridor, a lone scan).
-                    if s > share && threshold.is_some_and(|t| s >= t) {
+                    if s > share && !is_poor(s, threshold) {
                         result = again;
                         share = s;
                         check.recovered = true;

@@ -88,6 +88,13 @@ impl ValidationParams {
     }
 }
 
+/// True when `share` falls below the `threshold` of [`Validator::threshold`]; never while the
+/// history is too short to tell (`None`).
+#[must_use]
+pub fn is_poor(share: f64, threshold: Option<f64>) -> bool {
+    threshold.is_some_and(|t| share < t)
+}
+
 /// What the check said of one match.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Check {
@@ -189,7 +196,7 @@ impl Validator {
     /// refused. The `max_refusals`-th refusal in a row clears the history, so the scene the
     /// robot has entered sets the next level.
     pub fn refuse(&mut self, share: f64, threshold: Option<f64>) -> bool {
-        let refused = threshold.is_some_and(|t| share < t);
+        let refused = is_poor(share, threshold);
         self.refusals = if refused { self.refusals + 1 } else { 0 };
         if self.refusals >= self.params.max_refusals {
             self.clear();
