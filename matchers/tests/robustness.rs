@@ -234,6 +234,19 @@ fn on_loop(k: usize) -> Pose2 {
     )
 }
 
+/// The record of step `k` of the loop, with perfect odometry.
+fn loop_record(world: &SyntheticWorld, k: usize) -> Record {
+    let truth = on_loop(k);
+    let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
+    scan.timestamp = k as f64;
+    Record {
+        scan,
+        odometry: truth,
+        truth: Some(truth),
+        laser_offset: Pose2::IDENTITY,
+    }
+}
+
 #[test]
 fn the_map_stays_under_its_density_cap_over_ten_loops() {
     let world = SyntheticWorld::room();
@@ -244,16 +257,11 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
         let mut pipeline = config.build().expect("builds");
         let mut after_loop = Vec::new();
         for k in 0..400 {
-            let truth = on_loop(k);
-            let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
-            scan.timestamp = k as f64;
-            let e = pipeline.process(&Record {
-                scan,
-                odometry: truth,
-                truth: Some(truth),
-                laser_offset: Pose2::IDENTITY,
-            });
-            assert!(e.pose.distance(&truth) < 0.05, "{kind} step {k}: {e:?}");
+            let e = pipeline.process(&loop_record(&world, k));
+            assert!(
+                e.pose.distance(&on_loop(k)) < 0.05,
+                "{kind} step {k}: {e:?}"
+            );
             if k % 40 == 39 {
                 after_loop.push(pipeline.reference_points().len());
             }
@@ -281,15 +289,7 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     let mut pipeline = config.build().expect("builds");
     let mut sizes = Vec::new();
     for k in 0..120 {
-        let truth = on_loop(k);
-        let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
-        scan.timestamp = k as f64;
-        pipeline.process(&Record {
-            scan,
-            odometry: truth,
-            truth: Some(truth),
-            laser_offset: Pose2::IDENTITY,
-        });
+        pipeline.process(&loop_record(&world, k));
         if k % 40 == 39 {
             sizes.push(pipeline.reference_points().len());
         }
