@@ -350,6 +350,7 @@ const STEERING_COMMON: &[&str] = &[
     "motion.sigma_theta_per_m_deg",
     "validation.inlier_distance",
     "validation.max_share_drop",
+    "validation.max_residual_ratio",
     "correlative.window_xy",
     "correlative.window_deg",
 ];

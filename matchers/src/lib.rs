@@ -28,5 +28,5 @@ pub use correlative::{Candidate, CorrelativeParams, CorrelativeSearch};
 pub use icp::IcpParams;
 pub use idc::{Idc, IdcParams};
 pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance};
-pub use validation::{Check, ValidationParams, Validator};
+pub use validation::{Check, Fit, Level, ValidationParams, Validator};
 pub use wsm::{Wsm, WsmParams};

@@ -4,7 +4,7 @@
 use crate::ConfigError;
 use crate::correlative::{CorrelativeParams, CorrelativeSearch};
 use crate::icp::non_negative;
-use crate::validation::{Check, ValidationParams, Validator, is_poor};
+use crate::validation::{Check, Fit, ValidationParams, Validator, is_poor};
 use qicp_core::{
     Fallback, LaserNoise, MatchResult, Matrix3, Point2, Pose2, Record, Reference, ScanMatcher,
     SpatialIndex,
@@ -256,41 +256,45 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             return (result, Check::UNCHECKED);
         }
         let local = scan.points();
-        let threshold = self.validator.threshold();
-        let mut share = match result.fallback {
-            None => self
-                .validator
-                .inlier_share(&self.reference, local, &result.pose),
+        let level = self.validator.threshold();
+        let fit_of = |validator: &Validator, reference: &Reference<I>, r: &MatchResult| Fit {
+            share: validator.inlier_share(reference, local, &r.pose),
+            residual: r.residual,
+        };
+        let mut fit = match result.fallback {
+            None => fit_of(&self.validator, &self.reference, &result),
             // Nothing within the gate: odometry may be far off, or the scan sees new ground.
-            Some(Fallback::TooFewCorrespondences { .. }) => 0.0,
+            Some(Fallback::TooFewCorrespondences { .. }) => Fit {
+                share: 0.0,
+                residual: f64::NAN,
+            },
             Some(_) => return (result, Check::UNCHECKED),
         };
         let mut check = Check::UNCHECKED;
-        if self.validator.params.search && is_poor(share, threshold) {
+        if self.validator.params.search && is_poor(fit, level) {
             check.searched = true;
             if let Some(start) = self.search.search(&self.reference, local, &guess) {
                 let again = self
                     .matcher
                     .match_with_prior(&self.reference, scan, start.pose, prior);
                 if again.fallback.is_none() {
-                    let s = self
-                        .validator
-                        .inlier_share(&self.reference, local, &again.pose);
+                    let f = fit_of(&self.validator, &self.reference, &again);
                     // Only a match that passes the check replaces the first: one poor
                     // match is not traded for another (an aliased corridor, a lone scan).
-                    if s > share && !is_poor(s, threshold) {
+                    if f.share > fit.share && !is_poor(f, level) {
                         result = again;
-                        share = s;
+                        fit = f;
                         check.recovered = true;
                     }
                 }
             }
         }
         if result.fallback.is_none() {
-            self.validator.record(share);
-            check.inlier_share = share;
-            check.refused = self.validator.refuse(share, threshold);
-            if check.refused && self.validator.inlier_share(&self.reference, local, &guess) >= share
+            self.validator.record(fit);
+            check.inlier_share = fit.share;
+            check.refused = self.validator.refuse(fit, level);
+            if check.refused
+                && self.validator.inlier_share(&self.reference, local, &guess) >= fit.share
             {
                 // The prediction explains the scan at least as well: the match went astray,
                 // and the next prediction must not start from it.

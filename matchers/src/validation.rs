@@ -36,6 +36,10 @@ pub struct ValidationParams {
     /// A match is suspect, and a search runs, when its share of explained points falls more
     /// than this fraction below the running median share of recent scans. Default 0.25.
     pub max_share_drop: f64,
+    /// A match is also suspect when its residual correlation distance exceeds this many times
+    /// the running median residual: a match turned by a few degrees in clutter can keep most
+    /// points near some surface, but not near the ones they belong to. Default 2.
+    pub max_residual_ratio: f64,
     /// Checked scans in the running median. Default 25.
     pub history: usize,
     /// Run the correlative search on suspect matches. Default true.
@@ -52,6 +56,7 @@ impl Default for ValidationParams {
             enabled: true,
             inlier_distance: 0.1,
             max_share_drop: 0.25,
+            max_residual_ratio: 2.0,
             history: 25,
             search: true,
             max_refusals: 3,
@@ -72,6 +77,12 @@ impl ValidationParams {
                 format!("{} must be in [0, 1]", self.max_share_drop),
             ));
         }
+        if !(self.max_residual_ratio.is_finite() && self.max_residual_ratio >= 1.0) {
+            return Err(ConfigError::invalid(
+                "matcher.validation.max_residual_ratio",
+                format!("{} must be finite and ≥ 1", self.max_residual_ratio),
+            ));
+        }
         if !(MIN_HISTORY..=10_000).contains(&self.history) {
             return Err(ConfigError::invalid(
                 "matcher.validation.history",
@@ -88,11 +99,11 @@ impl ValidationParams {
     }
 }
 
-/// True when `share` falls below the `threshold` of [`Validator::threshold`]; never while the
-/// history is too short to tell (`None`).
+/// True when `fit` explains a smaller share than the `level` of [`Validator::threshold`], or
+/// leaves a larger residual; never while the history is too short to tell (`None`).
 #[must_use]
-pub fn is_poor(share: f64, threshold: Option<f64>) -> bool {
-    threshold.is_some_and(|t| share < t)
+pub fn is_poor(fit: Fit, level: Option<Level>) -> bool {
+    level.is_some_and(|l| fit.share < l.min_share || fit.residual > l.max_residual)
 }
 
 /// What the check said of one match.
@@ -126,9 +137,28 @@ impl Check {
 pub struct Validator {
     /// The parameters.
     pub params: ValidationParams,
-    recent: VecDeque<f64>,
+    recent: VecDeque<Fit>,
     sorted: Vec<f64>,
     refusals: usize,
+}
+
+/// How well a match fits its reference.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fit {
+    /// Share of the scan's points the reference explains.
+    pub share: f64,
+    /// The match's residual correlation distance (m).
+    pub residual: f64,
+}
+
+/// The running level a match is judged against: a fit with a smaller share, or a larger
+/// residual, is poor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Level {
+    /// `(1 − max_share_drop)` × the median share of recent scans.
+    pub min_share: f64,
+    /// `max_residual_ratio` × the median residual of recent scans (m).
+    pub max_residual: f64,
 }
 
 impl Validator {
@@ -169,34 +199,44 @@ impl Validator {
 
     /// The share below which a match is poor; `None` while the history is too short to tell.
     #[must_use]
-    pub fn threshold(&mut self) -> Option<f64> {
+    pub fn threshold(&mut self) -> Option<Level> {
         if self.recent.len() < MIN_HISTORY {
             return None;
         }
+        let share = self.median(|f| f.share);
+        let residual = self.median(|f| f.residual);
+        Some(Level {
+            min_share: (1.0 - self.params.max_share_drop) * share,
+            max_residual: self.params.max_residual_ratio * residual,
+        })
+    }
+
+    fn median(&mut self, of: impl Fn(&Fit) -> f64) -> f64 {
         self.sorted.clear();
-        self.sorted.extend(self.recent.iter().copied());
+        self.sorted.extend(self.recent.iter().map(of));
         let mid = self.sorted.len() / 2;
-        let median = *self.sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
-        Some((1.0 - self.params.max_share_drop) * median)
+        *self.sorted.select_nth_unstable_by(mid, f64::total_cmp).1
     }
 
     /// Adds a checked share to the running level. Every checked scan counts, refused or not:
     /// a robot entering a new room sees less of the map for a while, and the level follows.
-    pub fn record(&mut self, share: f64) {
-        if !share.is_finite() {
+    pub fn record(&mut self, fit: Fit) {
+        if !(fit.share.is_finite() && fit.residual.is_finite()) {
             return;
         }
         if self.recent.len() == self.params.history {
             self.recent.pop_front();
         }
-        self.recent.push_back(share);
+        self.recent.push_back(fit);
     }
 
     /// Judges a recorded share against the level it was checked with: true when it is
     /// refused. The `max_refusals`-th refusal in a row clears the history, so the scene the
     /// robot has entered sets the next level.
-    pub fn refuse(&mut self, share: f64, threshold: Option<f64>) -> bool {
-        let refused = is_poor(share, threshold);
+    pub fn refuse(&mut self, fit: Fit, level: Option<Level>) -> bool {
+        // A residual above the level makes a match suspect, not refused: people walking by, a
+        // door left open raise the residual of right matches too.
+        let refused = level.is_some_and(|l| fit.share < l.min_share);
         self.refusals = if refused { self.refusals + 1 } else { 0 };
         if self.refusals >= self.params.max_refusals {
             self.clear();
@@ -215,43 +255,56 @@ impl Validator {
 mod tests {
     use super::*;
 
+    fn fit(share: f64, residual: f64) -> Fit {
+        Fit { share, residual }
+    }
+
     #[test]
-    fn the_level_follows_the_median_of_recent_shares() {
+    fn the_level_follows_the_median_of_recent_fits() {
         let mut v = Validator::new(ValidationParams {
             history: 5,
             ..ValidationParams::default()
         });
         for s in [0.9, 0.8, 0.9, 0.85] {
-            v.record(s);
+            v.record(fit(s, 0.01));
             assert_eq!(v.threshold(), None, "too few scans to judge");
         }
-        v.record(0.1);
-        assert!((v.threshold().unwrap() - 0.75 * 0.85).abs() < 1e-12);
+        v.record(fit(0.1, 0.03));
+        let level = v.threshold().unwrap();
+        assert!((level.min_share - 0.75 * 0.85).abs() < 1e-12);
+        assert!((level.max_residual - 2.0 * 0.01).abs() < 1e-12);
         for _ in 0..5 {
-            v.record(0.3);
+            v.record(fit(0.3, 0.02));
         }
+        let level = v.threshold().unwrap();
         assert!(
-            (v.threshold().unwrap() - 0.75 * 0.3).abs() < 1e-12,
+            (level.min_share - 0.75 * 0.3).abs() < 1e-12,
             "the old level is forgotten"
         );
+        assert!((level.max_residual - 0.04).abs() < 1e-12);
+        assert!(!is_poor(fit(0.3, 0.04), Some(level)));
+        assert!(is_poor(fit(0.2, 0.01), Some(level)), "too small a share");
+        assert!(is_poor(fit(0.9, 0.05), Some(level)), "too large a residual");
+        assert!(!is_poor(fit(0.0, 1.0), None), "no level, no judgement");
     }
 
     #[test]
     fn a_run_of_refusals_starts_a_new_level() {
         let mut v = Validator::new(ValidationParams::default());
         for _ in 0..10 {
-            v.record(0.95);
+            v.record(fit(0.95, 0.01));
         }
         let t = v.threshold();
-        assert!(!v.refuse(0.9, t));
-        assert!(v.refuse(0.5, t));
-        assert!(!v.refuse(0.9, t), "an accepted match ends the run");
-        assert!(v.refuse(0.5, t) && v.refuse(0.5, t));
+        let (good, bad) = (fit(0.9, 0.01), fit(0.5, 0.01));
+        assert!(!v.refuse(good, t));
+        assert!(v.refuse(bad, t));
+        assert!(!v.refuse(good, t), "an accepted match ends the run");
+        assert!(v.refuse(bad, t) && v.refuse(bad, t));
         assert!(
             v.threshold().is_some(),
             "two refusals in a row keep the level"
         );
-        assert!(v.refuse(0.5, t));
+        assert!(v.refuse(bad, t));
         assert_eq!(v.threshold(), None, "the third starts afresh");
     }
 }
