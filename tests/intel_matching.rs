@@ -1,7 +1,7 @@
 //! The whole Intel Research Lab log through the matchers, scored with the Freiburg benchmark
 //! relations. Reads `../shared/data/intel/` (never copied into the project).
 //!
-//! Measured (mean translational error): q-wsm 0.023 m, q-idc 0.031 m, wsm 0.56 m, raw odometry
+//! Measured (mean translational error): q-wsm 0.032 m, q-idc 0.028 m, wsm 0.56 m, raw odometry
 //! 7.37 m; published: scan matching 0.220 m, RBPF SLAM 0.070 m, graph SLAM 0.031 m.
 
 use qicp::eval::evaluate_relations;
@@ -9,6 +9,7 @@ use qicp::logs::carmen::{CarmenOptions, read_carmen};
 use qicp::logs::relations::read_relations;
 use qicp::matching::run_matcher;
 use qicp_matchers::{MatcherConfig, MatcherKind};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 fn data(name: &str) -> PathBuf {
@@ -16,7 +17,7 @@ fn data(name: &str) -> PathBuf {
 }
 
 /// Mean translational and rotational (deg) relation error of `kind` with its defaults.
-fn score(kind: MatcherKind) -> (f64, f64, usize) {
+fn score(kind: MatcherKind) -> (f64, f64, usize, BTreeMap<String, usize>) {
     let log = read_carmen(&data("intel.clf.bz2"), &CarmenOptions::default()).expect("Intel log");
     let relations = read_relations(&data("intel.relations")).expect("relations");
     let run = run_matcher(&log.records, &MatcherConfig::defaults(kind), false).expect("run");
@@ -28,30 +29,38 @@ fn score(kind: MatcherKind) -> (f64, f64, usize) {
         report.trans_mean,
         report.rot_mean_deg,
         run.summary.fallbacks,
+        run.summary.fallback_reasons,
     )
 }
 
 #[test]
 fn q_wsm_on_intel_beats_rbpf_slam() {
-    let (trans, rot, fallbacks) = score(MatcherKind::QWsm);
+    let (trans, rot, fallbacks, reasons) = score(MatcherKind::QWsm);
     // RBPF SLAM scores 0.070 m, graph SLAM 0.031 m; boosted scan matching alone scores
-    // 0.023 m and must stay below 0.05 m.
+    // 0.032 m and must stay below 0.05 m.
     assert!(trans < 0.05, "q-wsm mean translational error {trans:.4} m");
     assert!(rot < 1.0, "q-wsm mean rotational error {rot:.3}°");
-    assert!(fallbacks <= 1, "only the first scan has nothing to match");
+    // Besides the first scan, only matches the validation refused (2 of 13,631) keep the
+    // prediction.
+    let refused = reasons.get("refused").copied().unwrap_or(0);
+    assert!(
+        fallbacks - refused <= 1,
+        "only the first scan has nothing to match"
+    );
+    assert!(refused <= 5, "{refused} matches refused");
 }
 
 #[test]
 fn wsm_on_intel_beats_a_c_scan_matcher() {
-    let (trans, _, _) = score(MatcherKind::Wsm);
+    let (trans, _, _, _) = score(MatcherKind::Wsm);
     // CSM (point-to-line ICP, scan-to-scan, defaults) scores 0.82 m on this log.
     assert!(trans < 0.82, "wsm mean translational error {trans:.4} m");
 }
 
 #[test]
 fn q_idc_on_intel_beats_rbpf_slam() {
-    let (trans, rot, _) = score(MatcherKind::QIdc);
-    // Scores 0.031 m; parameters near the defaults have given up to 0.71 m (README, Known
+    let (trans, rot, _, _) = score(MatcherKind::QIdc);
+    // Scores 0.028 m; parameters near the defaults have given up to 0.71 m (README, Known
     // limits), so the bound is the target rather than a tight one.
     assert!(trans < 0.10, "q-idc mean translational error {trans:.4} m");
     assert!(rot < 1.0, "q-idc mean rotational error {rot:.3}°");
