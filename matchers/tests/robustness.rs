@@ -294,5 +294,6 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
             sizes.push(pipeline.reference_points().len());
         }
     }
+    println!("full density: {sizes:?}");
     assert!(sizes[2] as f64 > 2.5 * sizes[0] as f64, "{sizes:?}");
 }
