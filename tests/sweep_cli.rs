@@ -192,24 +192,33 @@ fn sweep_refuses_an_unknown_variant_before_reading_the_log() {
     );
 }
 
-#[test]
-fn sweep_refuses_a_missing_relations_file_before_matching() {
+/// `qicp sweep` of the Intel log with q-wsm and `relations`, which must fail before any
+/// matching: its stderr.
+fn refused_before_matching(relations: &str, extra: &[&str]) -> String {
     let log = data("intel.clf.bz2");
-    let o = qicp(&[
+    let mut args = vec![
         "sweep",
         &log,
         "--matcher",
         "q-wsm",
         "--relations",
-        "/nonexistent/intel.relations",
-    ]);
+        relations,
+    ];
+    args.extend_from_slice(extra);
+    let o = qicp(&args);
     assert!(!o.status.success());
-    let stderr = String::from_utf8_lossy(&o.stderr);
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(!stderr.contains("done in"), "nothing was matched: {stderr}");
+    stderr
+}
+
+#[test]
+fn sweep_refuses_a_missing_relations_file_before_matching() {
+    let stderr = refused_before_matching("/nonexistent/intel.relations", &[]);
     assert!(
         stderr.contains("/nonexistent/intel.relations"),
         "names the file: {stderr}"
     );
-    assert!(!stderr.contains("done in"), "nothing was matched: {stderr}");
 }
 
 #[test]
@@ -218,21 +227,9 @@ fn sweep_refuses_relations_of_another_time_span() {
     std::fs::create_dir_all(&dir).expect("temp dir");
     let relations = dir.join("elsewhere.relations");
     std::fs::write(&relations, "1.0 2.0 0.1 0 0 0 0 0\n").expect("relations written");
-    let log = data("intel.clf.bz2");
-    let o = qicp(&[
-        "sweep",
-        &log,
-        "--matcher",
-        "q-wsm",
-        "--relations",
-        relations.to_str().expect("utf-8 path"),
-        "--scans",
-        "100",
-    ]);
-    assert!(!o.status.success());
-    let stderr = String::from_utf8_lossy(&o.stderr);
+    let stderr =
+        refused_before_matching(relations.to_str().expect("utf-8 path"), &["--scans", "100"]);
     assert!(stderr.contains("do they belong to this log"), "{stderr}");
-    assert!(!stderr.contains("done in"), "nothing was matched: {stderr}");
 }
 
 /// Issue 12's robustness bounds, on the first 3,000 Intel scans where they hold for these

@@ -207,13 +207,13 @@ impl<I: SpatialIndex> Reference<I> {
         c + tangent * slide
     }
 
-    /// Distance from `p` to the reference surface through its nearest point, if that point
-    /// lies within `reach`.
+    /// Squared distance from `p` to the reference surface through its nearest point, if that
+    /// point lies within squared distance `reach_sq`.
     #[must_use]
-    pub fn surface_distance(&self, p: &Point2<f64>, reach: f64) -> Option<f64> {
+    pub fn surface_distance_sq(&self, p: &Point2<f64>, reach_sq: f64) -> Option<f64> {
         self.index
-            .nearest_within(p, reach * reach)
-            .map(|n| (self.surface_foot(n.id, p) - p).norm())
+            .nearest_within(p, reach_sq)
+            .map(|n| (self.surface_foot(n.id, p) - p).norm_squared())
     }
 
     /// Removes everything.

@@ -373,11 +373,14 @@ impl MatcherConfig {
         } else {
             STEERING_WSM
         };
+        let Ok(value) = self.effective_value() else {
+            return Vec::new();
+        };
         STEERING_COMMON
             .iter()
             .chain(family)
             .map(|k| format!("matcher.{k}"))
-            .filter(|k| self.parameter(k).is_some_and(|v| v != 0.0))
+            .filter(|k| lookup(&value, k).is_some_and(|v| v != 0.0))
             .collect()
     }
 
@@ -391,16 +394,7 @@ impl MatcherConfig {
     /// defaults filled in; `None` if the key names no number.
     #[must_use]
     pub fn parameter(&self, key: &str) -> Option<f64> {
-        let value = self.effective_value().ok()?;
-        let mut at = &value;
-        for part in key.strip_prefix("matcher.")?.split('.') {
-            at = at.get(part)?;
-        }
-        match at {
-            toml::Value::Float(v) => Some(*v),
-            toml::Value::Integer(v) => Some(*v as f64),
-            _ => None,
-        }
+        lookup(&self.effective_value().ok()?, key)
     }
 
     /// This config with the numeric parameter `key` (a dotted key, as
@@ -423,5 +417,18 @@ impl MatcherConfig {
             .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
         c.validate()?;
         Ok(c)
+    }
+}
+
+/// The number at a dotted key (`"matcher.wsm.sigma_slide"`) of an effective config's TOML.
+fn lookup(value: &toml::Value, key: &str) -> Option<f64> {
+    let mut at = value;
+    for part in key.strip_prefix("matcher.")?.split('.') {
+        at = at.get(part)?;
+    }
+    match at {
+        toml::Value::Float(v) => Some(*v),
+        toml::Value::Integer(v) => Some(*v as f64),
+        _ => None,
     }
 }

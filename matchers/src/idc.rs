@@ -472,13 +472,8 @@ impl<C: CorrespondenceMetric> Idc<C> {
             .map(|b| {
                 let p = pose.transform_point(b);
                 reference
-                    .index()
-                    .nearest_within(&p, 4.0 * cap)
-                    .map_or(cap, |n| {
-                        (reference.surface_foot(n.id, &p) - p)
-                            .norm_squared()
-                            .min(cap)
-                    })
+                    .surface_distance_sq(&p, 4.0 * cap)
+                    .map_or(cap, |d_sq| d_sq.min(cap))
             })
             .sum()
     }

@@ -186,18 +186,19 @@ impl Validator {
             return 0.0;
         }
         let d = self.params.inlier_distance;
+        let reach = 2.0 * d;
         let explained = local
             .iter()
             .filter(|q| {
                 reference
-                    .surface_distance(&pose.transform_point(q), 2.0 * d)
-                    .is_some_and(|e| e <= d)
+                    .surface_distance_sq(&pose.transform_point(q), reach * reach)
+                    .is_some_and(|e_sq| e_sq.sqrt() <= d)
             })
             .count();
         explained as f64 / local.len() as f64
     }
 
-    /// The share below which a match is poor; `None` while the history is too short to tell.
+    /// The level below which a match is poor; `None` while the history is too short to tell.
     #[must_use]
     pub fn threshold(&mut self) -> Option<Level> {
         if self.recent.len() < MIN_HISTORY {
