@@ -61,6 +61,10 @@ pub(crate) fn positive(key: &str, v: f64) -> Result<(), ConfigError> {
     }
 }
 
+/// The most ICP iterations a match may run: far above what converging matches need (tens),
+/// low enough that a typo cannot hang a run.
+pub const MAX_ITERATIONS: u32 = 10_000;
+
 /// Refuses a value that is negative or not finite.
 pub(crate) fn non_negative(key: &str, v: f64) -> Result<(), ConfigError> {
     if v.is_finite() && v >= 0.0 {
@@ -76,10 +80,10 @@ pub(crate) fn non_negative(key: &str, v: f64) -> Result<(), ConfigError> {
 impl IcpParams {
     /// Checks every value; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.max_iterations == 0 {
+        if !(1..=MAX_ITERATIONS).contains(&self.max_iterations) {
             return Err(ConfigError::invalid(
                 "matcher.icp.max_iterations",
-                "must be at least 1",
+                format!("{} must lie in 1..={MAX_ITERATIONS}", self.max_iterations),
             ));
         }
         positive("matcher.icp.max_dist_start", self.max_dist_start)?;
