@@ -65,18 +65,21 @@ fn every_record_type_is_read() {
     let log = read_str(EVERY_TYPE, &CarmenOptions::default()).unwrap();
     println!("{}", log.report());
     assert_eq!(log.records.len(), 2);
-    assert_eq!(log.counts.get("FLASER"), Some(&1));
-    assert_eq!(log.counts.get("ROBOTLASER1"), Some(&1));
-    assert_eq!(log.counts.get("ODOM"), Some(&2));
-    assert_eq!(log.counts.get("TRUEPOS"), Some(&2));
-    assert_eq!(log.counts.get("PARAM"), Some(&3));
-    assert_eq!(log.unknown_types.get("SYNC"), Some(&2));
-    assert_eq!(log.unknown_types.get("RLASER"), Some(&1));
+    assert_eq!(log.info.counts.get("FLASER"), Some(&1));
+    assert_eq!(log.info.counts.get("ROBOTLASER1"), Some(&1));
+    assert_eq!(log.info.counts.get("ODOM"), Some(&2));
+    assert_eq!(log.info.counts.get("TRUEPOS"), Some(&2));
+    assert_eq!(log.info.counts.get("PARAM"), Some(&3));
+    assert_eq!(log.info.unknown_types.get("SYNC"), Some(&2));
+    assert_eq!(log.info.unknown_types.get("RLASER"), Some(&1));
     assert!(log.report().contains("2 SYNC"));
     assert_eq!(log.odometry.len(), 2);
     assert_eq!(log.odometry[0], (10.0, Pose2::new(1.0, 2.0, 0.5)));
     assert_eq!(
-        log.params.get("laser_front_laser_fov").map(String::as_str),
+        log.info
+            .params
+            .get("laser_front_laser_fov")
+            .map(String::as_str),
         Some("90")
     );
 
@@ -182,7 +185,7 @@ fn unsorted_input_is_sorted_stably() {
         .map(|r| (r.timestamp(), r.odometry.x))
         .collect();
     assert_eq!(seen, [(1.0, 1.0), (2.0, 2.0), (2.0, 2.5), (3.0, 3.0)]);
-    assert_eq!(log.out_of_order, 1);
+    assert_eq!(log.info.out_of_order, 1);
     assert_eq!(log.odometry[0].0, 8.0);
 }
 
@@ -232,9 +235,9 @@ fn malformed_lines_name_their_line_and_lenient_mode_counts_them() {
             ..CarmenOptions::default()
         };
         let log = read_str(&text, &lenient).unwrap();
-        assert_eq!(log.skipped_lines, 1, "{bad}");
+        assert_eq!(log.info.skipped_lines, 1, "{bad}");
         assert_eq!(log.records.len(), 2);
-        assert!(log.skipped_examples[0].contains("test.clf:4"));
+        assert!(log.info.skipped_examples[0].contains("test.clf:4"));
         assert!(log.report().contains("skipped 1 malformed lines"));
     }
 }
@@ -261,7 +264,7 @@ fn bzip2_logs_are_recognised_by_content_and_streamed() {
     let a = read_carmen(&plain, &CarmenOptions::default()).unwrap();
     let b = read_carmen(&packed, &CarmenOptions::default()).unwrap();
     assert_eq!(a.records, b.records);
-    assert_eq!(a.counts, b.counts);
+    assert_eq!(a.info.counts, b.info.counts);
     assert_eq!(a.records.len(), 2);
 
     let missing = read_carmen(&dir.join("absent.clf"), &CarmenOptions::default()).unwrap_err();
@@ -325,7 +328,7 @@ fn carmen_round_trip_as_flaser() {
     assert_eq!(text.matches("\nTRUEPOS ").count(), 20);
     assert!(!text.contains("ROBOTLASER1 0"));
     let back = read_str(&text, &CarmenOptions::default()).unwrap();
-    assert_eq!(back.skipped_lines, 0);
+    assert_eq!(back.info.skipped_lines, 0);
     assert_same(&records, &back.records);
 }
 

@@ -40,13 +40,17 @@ fn intel_log_reads_sorted_with_odometry_matching_the_benchmark() {
     assert!(elapsed.as_secs_f64() < 10.0, "reading took {elapsed:?}");
 
     assert_eq!(log.records.len(), 13_631);
-    assert_eq!(log.counts.get("FLASER"), Some(&13_631));
-    assert_eq!(log.counts.get("ODOM"), Some(&26_915));
-    assert_eq!(log.counts.get("PARAM"), Some(&2));
+    assert_eq!(log.info.counts.get("FLASER"), Some(&13_631));
+    assert_eq!(log.info.counts.get("ODOM"), Some(&26_915));
+    assert_eq!(log.info.counts.get("PARAM"), Some(&2));
     assert_eq!(log.odometry.len(), 26_915);
-    assert!(log.unknown_types.is_empty(), "{:?}", log.unknown_types);
-    assert_eq!(log.skipped_lines, 0);
-    assert!(log.out_of_order > 600, "{}", log.out_of_order);
+    assert!(
+        log.info.unknown_types.is_empty(),
+        "{:?}",
+        log.info.unknown_types
+    );
+    assert_eq!(log.info.skipped_lines, 0);
+    assert!(log.info.out_of_order > 600, "{}", log.info.out_of_order);
     assert!(
         log.records
             .windows(2)

@@ -34,6 +34,14 @@ pub enum LogError {
         /// What is wrong.
         why: String,
     },
+    /// The file holds no laser record.
+    #[error("{path}: no laser records (FLASER or ROBOTLASER1) to match; read {report}")]
+    Empty {
+        /// The file.
+        path: String,
+        /// What was read instead ([`carmen::LogInfo::report`]).
+        report: String,
+    },
     /// A reader option is not usable (e.g. a negative field of view).
     #[error("option `{name}`: {why}")]
     InvalidOption {
@@ -49,6 +57,14 @@ impl LogError {
         LogError::Io {
             path: path.display().to_string(),
             source,
+        }
+    }
+
+    /// A log that held no laser record.
+    pub(crate) fn empty(path: &Path, info: &carmen::LogInfo) -> Self {
+        LogError::Empty {
+            path: path.display().to_string(),
+            report: info.report(),
         }
     }
 

@@ -15,10 +15,15 @@ pub type Stamped = (f64, Pose2);
 pub fn write_tum<W: Write>(w: W, poses: &[Stamped]) -> std::io::Result<()> {
     let mut w = std::io::BufWriter::new(w);
     for (t, p) in poses {
-        let (qz, qw) = (p.theta / 2.0).sin_cos();
-        writeln!(w, "{t} {} {} 0 0 0 {qz} {qw}", p.x, p.y)?;
+        write_tum_pose(&mut w, *t, p)?;
     }
     w.flush()
+}
+
+/// Writes one pose as a TUM line (unbuffered: give it a buffered writer).
+pub fn write_tum_pose<W: Write>(mut w: W, t: f64, p: &Pose2) -> std::io::Result<()> {
+    let (qz, qw) = (p.theta / 2.0).sin_cos();
+    writeln!(w, "{t} {} {} 0 0 0 {qz} {qw}", p.x, p.y)
 }
 
 /// Reads a TUM trajectory (planar poses: z, roll and pitch ignored). Blank lines and lines

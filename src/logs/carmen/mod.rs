@@ -1,0 +1,864 @@
+//! CARMEN text logs: `FLASER`, `ROBOTLASER1`, `ODOM`, `PARAM`, `TRUEPOS` (plain or `.bz2`).
+//!
+//! Record formats (whitespace-separated, one per line, `#` starts a comment line):
+//!
+//! ```text
+//! ODOM x y theta tv rv accel ipc_timestamp ipc_hostname logger_timestamp
+//! FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ipc_timestamp ipc_hostname logger_timestamp
+//! ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode
+//!     n r_1..r_n n_remissions [remissions] laser_x laser_y laser_theta
+//!     robot_x robot_y robot_theta tv rv forward_safety side_safety turn_axis
+//!     ipc_timestamp ipc_hostname logger_timestamp
+//! TRUEPOS true_x true_y true_theta odom_x odom_y odom_theta ipc_timestamp ipc_hostname logger_timestamp
+//! PARAM name value [ipc_hostname logger_timestamp]
+//! ```
+//!
+//! Every laser line becomes one [`Record`], in `ipc_timestamp` order (ties in file order: logs
+//! such as Intel's are not written in time order). [`CarmenReader`] streams them in memory
+//! bounded by a reorder window; [`read_carmen`] reads them all. Its odometry is the robot pose of the line (the
+//! `odom_*` fields of `FLASER`, the `robot_*` fields of `ROBOTLASER1`); `TRUEPOS` lines give
+//! the ground truth of the laser record nearest in time.
+//!
+//! `FLASER` lines carry no beam angles. They are laid out like CARMEN's own reader
+//! (`carmen_laser_guess_angle_increment`) and GMapping do: the first beam at −fov/2 and, for
+//! the 180- and 360-beam SICK layouts that drop the last beam of the sweep, a step of fov/n
+//! (1° and 0.5° over 180°); any other beam count spreads evenly over the fov (step
+//! fov/(n−1)). See [`flaser_geometry`].
+//!
+//! `PARAM`s `laser_front_laser_fov` (degrees, in (0, 360]), `robot_front_laser_max` (m,
+//! positive), `robot_frontlaser_offset`, `robot_frontlaser_side_offset` (m) and
+//! `robot_frontlaser_angular_offset` (rad) shape the `FLASER` scans; they come before the
+//! first `FLASER` line (the last value of a name wins), and [`CarmenOptions`] set explicitly
+//! override them. Unknown record types (`RLASER`, `SYNC`, `RAWLASER1`, …) are skipped and
+//! counted in [`LogInfo::unknown_types`]; [`LogInfo::report`] lists them.
+//!
+//! Limits: a laser line announces at most [`CarmenOptions::max_beams`] readings; poses lie
+//! within ±[`MAX_COORDINATE`](qicp_core::index::MAX_COORDINATE) m; a `ROBOTLASER1` angular resolution
+//! is not 0 and its beams span at most a full turn.
+
+mod fields;
+mod write;
+
+pub use write::write_carmen;
+
+use super::{LogError, next_line, parse_f64};
+use fields::{
+    Layout, Parsed, RawLaser, parse_flaser, parse_odom, parse_param, parse_robotlaser1,
+    parse_truepos,
+};
+use qicp_core::{BeamGeometry, Pose2, Record, Scan};
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BinaryHeap};
+use std::io::BufRead;
+use std::path::Path;
+
+/// Field of view assumed for `FLASER` lines when neither the options nor a `PARAM` give one.
+pub const DEFAULT_FLASER_FOV_DEG: f64 = 180.0;
+/// Maximum range assumed for `FLASER` lines when neither the options nor a `PARAM` give one:
+/// SICK LMS no-returns read about 81.9 m.
+pub const DEFAULT_FLASER_MAX_RANGE: f64 = 81.0;
+/// How far (s) a `TRUEPOS` may lie from a laser record and still be its ground truth.
+pub const DEFAULT_TRUEPOS_MAX_DT: f64 = 0.1;
+/// Readings a laser line may announce at most: well above any real 2D laser (a 0.1° scanner
+/// over 360° gives 3,600).
+pub const DEFAULT_MAX_BEAMS: usize = 10_000;
+/// How far (s) laser lines may come out of time order and still be put back in order.
+pub const DEFAULT_REORDER_WINDOW: f64 = 5.0;
+/// How many laser records the reorder buffer holds at most.
+pub const DEFAULT_REORDER_RECORDS: usize = 1_000;
+
+/// How to read a CARMEN log.
+///
+/// Fields left `None` come from the log's `PARAM` lines, else from the documented default:
+/// an explicit option always wins over the log.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CarmenOptions {
+    /// Skip and count malformed lines instead of failing on the first.
+    pub lenient: bool,
+    /// Field of view of `FLASER` scans (degrees). Else `PARAM laser_front_laser_fov`, else
+    /// [`DEFAULT_FLASER_FOV_DEG`].
+    pub flaser_fov_deg: Option<f64>,
+    /// Readings at or above this are no-returns (m). Applies to `FLASER` (else
+    /// `PARAM robot_front_laser_max`, else [`DEFAULT_FLASER_MAX_RANGE`]) and, when set, to
+    /// `ROBOTLASER1` too (else the line's own `max_range` field).
+    pub max_range: Option<f64>,
+    /// Readings below this are discarded (m); CARMEN logs carry no minimum range. Default 0.
+    pub min_range: f64,
+    /// Pose of the front laser in the robot frame for `FLASER` lines. Else
+    /// `PARAM robot_frontlaser_offset` (x), `robot_frontlaser_side_offset` (y) and
+    /// `robot_frontlaser_angular_offset` (rad), each 0 when absent. `ROBOTLASER1` lines carry
+    /// their own laser pose.
+    pub laser_offset: Option<Pose2>,
+    /// How far (s) a `TRUEPOS` may lie from a laser record and still be attached as its ground
+    /// truth. Default [`DEFAULT_TRUEPOS_MAX_DT`].
+    pub truepos_max_dt: f64,
+    /// Readings a laser line may announce at most; a longer line is malformed. Default
+    /// [`DEFAULT_MAX_BEAMS`].
+    pub max_beams: usize,
+    /// How far (s) laser lines may come out of time order and still be sorted; at least
+    /// `truepos_max_dt`. Default [`DEFAULT_REORDER_WINDOW`].
+    pub reorder_window: f64,
+    /// How many records the reorder buffer holds at most, so that memory stays bounded even
+    /// when timestamps stand still. Default [`DEFAULT_REORDER_RECORDS`].
+    pub reorder_records: usize,
+}
+
+impl Default for CarmenOptions {
+    fn default() -> Self {
+        Self {
+            lenient: false,
+            flaser_fov_deg: None,
+            max_range: None,
+            min_range: 0.0,
+            laser_offset: None,
+            truepos_max_dt: DEFAULT_TRUEPOS_MAX_DT,
+            max_beams: DEFAULT_MAX_BEAMS,
+            reorder_window: DEFAULT_REORDER_WINDOW,
+            reorder_records: DEFAULT_REORDER_RECORDS,
+        }
+    }
+}
+
+impl CarmenOptions {
+    /// Refuses options that cannot describe a laser.
+    pub fn validate(&self) -> Result<(), LogError> {
+        let bad = |name, why: &str| {
+            Err(LogError::InvalidOption {
+                name,
+                why: why.to_string(),
+            })
+        };
+        if let Some(fov) = self.flaser_fov_deg
+            && !(fov.is_finite() && fov > 0.0 && fov <= 360.0)
+        {
+            return bad("flaser_fov_deg", "must lie in (0, 360]");
+        }
+        if let Some(m) = self.max_range
+            && !(m.is_finite() && m > 0.0)
+        {
+            return bad("max_range", "must be finite and positive");
+        }
+        if !(self.min_range.is_finite() && self.min_range >= 0.0) {
+            return bad("min_range", "must be finite and non-negative");
+        }
+        if let Some(o) = self.laser_offset
+            && !o.is_finite()
+        {
+            return bad("laser_offset", "must be finite");
+        }
+        if !(self.truepos_max_dt.is_finite() && self.truepos_max_dt >= 0.0) {
+            return bad("truepos_max_dt", "must be finite and non-negative");
+        }
+        if self.max_beams == 0 {
+            return bad("max_beams", "must be at least 1");
+        }
+        if !(self.reorder_window.is_finite() && self.reorder_window >= self.truepos_max_dt) {
+            return bad(
+                "reorder_window",
+                "must be finite and at least truepos_max_dt",
+            );
+        }
+        if self.reorder_records == 0 {
+            return bad("reorder_records", "must be at least 1");
+        }
+        Ok(())
+    }
+}
+
+/// What a read met besides the laser records: counts, skips, `PARAM`s.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LogInfo {
+    /// Laser records delivered.
+    pub records: usize,
+    /// Malformed lines skipped (lenient mode only).
+    pub skipped_lines: usize,
+    /// Why the first few skipped lines were skipped (`file:line: why`).
+    pub skipped_examples: Vec<String>,
+    /// `PARAM` lines, name → value (the last one wins).
+    pub params: BTreeMap<String, String>,
+    /// Lines of each record type read (known types only).
+    pub counts: BTreeMap<String, usize>,
+    /// Lines of record types this reader does not know, skipped, per type.
+    pub unknown_types: BTreeMap<String, usize>,
+    /// Laser lines whose timestamp is earlier than the previous laser line's (put back in
+    /// order).
+    pub out_of_order: usize,
+    /// Laser lines dropped because they came later than [`CarmenOptions::reorder_window`]
+    /// allows: records after them had already been delivered.
+    pub late: usize,
+    /// Time of the first and of the last record delivered (s).
+    pub span: Option<(f64, f64)>,
+    /// Beams of the first record delivered.
+    pub first_beams: usize,
+}
+
+impl LogInfo {
+    /// A human-readable summary: what was read, what was skipped and why.
+    #[must_use]
+    pub fn report(&self) -> String {
+        let mut s = format!("{} laser records", self.records);
+        if let Some((first, last)) = self.span {
+            s += &format!(" ({} beams, {:.1} s)", self.first_beams, last - first);
+        }
+        for (k, v) in &self.counts {
+            s += &format!(", {v} {k}");
+        }
+        if self.out_of_order > 0 {
+            s += &format!(
+                "; {} laser lines out of time order (sorted)",
+                self.out_of_order
+            );
+        }
+        if self.late > 0 {
+            s += &format!(
+                "; dropped {} laser lines more than the reorder window out of time order",
+                self.late
+            );
+        }
+        if !self.unknown_types.is_empty() {
+            let list: Vec<String> = self
+                .unknown_types
+                .iter()
+                .map(|(k, v)| format!("{v} {k}"))
+                .collect();
+            s += &format!("; skipped unknown record types: {}", list.join(", "));
+        }
+        if self.skipped_lines > 0 {
+            s += &format!("; skipped {} malformed lines", self.skipped_lines);
+            for e in &self.skipped_examples {
+                s += &format!("\n  {e}");
+            }
+        }
+        s
+    }
+
+    /// Warnings a command prints on stderr: skipped and dropped lines.
+    pub fn warn(&self, path: &Path) {
+        if self.skipped_lines > 0 {
+            eprintln!(
+                "warning: skipped {} malformed lines of {} (--lenient)",
+                self.skipped_lines,
+                path.display()
+            );
+        }
+        if self.late > 0 {
+            eprintln!(
+                "warning: dropped {} laser lines of {} that came more than {} s out of time order",
+                self.late,
+                path.display(),
+                DEFAULT_REORDER_WINDOW
+            );
+        }
+    }
+}
+
+/// A log read into memory, laser records sorted by timestamp.
+#[derive(Debug, Clone, Default)]
+pub struct CarmenLog {
+    /// Laser records in time order.
+    pub records: Vec<Record>,
+    /// `ODOM` records `(ipc_timestamp, pose)` in time order.
+    pub odometry: Vec<(f64, Pose2)>,
+    /// `TRUEPOS` records `(ipc_timestamp, true pose)` in time order.
+    pub truepos: Vec<(f64, Pose2)>,
+    /// Counts, skips and `PARAM`s.
+    pub info: LogInfo,
+}
+
+impl CarmenLog {
+    /// Laser records with ground truth attached.
+    #[must_use]
+    pub fn records_with_truth(&self) -> usize {
+        self.records.iter().filter(|r| r.truth.is_some()).count()
+    }
+
+    /// The odometry of the laser records: `(timestamp, robot pose)` in time order.
+    #[must_use]
+    pub fn laser_odometry(&self) -> Vec<(f64, Pose2)> {
+        self.records
+            .iter()
+            .map(|r| (r.timestamp(), r.odometry))
+            .collect()
+    }
+
+    /// The ground truth of the laser records that have one, in time order.
+    #[must_use]
+    pub fn laser_truth(&self) -> Vec<(f64, Pose2)> {
+        self.records
+            .iter()
+            .filter_map(|r| r.truth.map(|t| (r.timestamp(), t)))
+            .collect()
+    }
+
+    /// A human-readable summary: what was read, what was skipped and why.
+    #[must_use]
+    pub fn report(&self) -> String {
+        self.info.report()
+    }
+}
+
+/// The beam layout of a `FLASER` scan of `beams` beams over `fov` radians (see the module
+/// documentation): first beam at −fov/2; step fov/n for the 180- and 360-beam SICK layouts
+/// (CARMEN's `carmen_laser_guess_angle_increment`), fov/(n−1) otherwise.
+#[must_use]
+pub fn flaser_geometry(beams: usize, fov: f64, max_range: f64, min_range: f64) -> BeamGeometry {
+    let angle_increment = match beams {
+        180 | 360 => fov / beams as f64,
+        0 | 1 => 0.0,
+        n => fov / (n - 1) as f64,
+    };
+    BeamGeometry {
+        angle_min: -fov / 2.0,
+        angle_increment,
+        max_range,
+        min_range,
+    }
+}
+
+/// How many skipped lines [`LogInfo::skipped_examples`] keeps.
+const SKIPPED_EXAMPLES: usize = 10;
+
+/// The `PARAM`s that shape `FLASER` scans.
+const FLASER_PARAMS: [&str; 5] = [
+    "laser_front_laser_fov",
+    "robot_front_laser_max",
+    "robot_frontlaser_offset",
+    "robot_frontlaser_side_offset",
+    "robot_frontlaser_angular_offset",
+];
+
+/// Reads a CARMEN log for a command: strict, or with `lenient` skipping malformed lines and
+/// warning on stderr how many it skipped. A log without a laser record is an error.
+pub fn load_for_command(path: &Path, lenient: bool) -> Result<CarmenLog, LogError> {
+    let log = read_carmen(
+        path,
+        &CarmenOptions {
+            lenient,
+            ..CarmenOptions::default()
+        },
+    )?;
+    log.info.warn(path);
+    if log.records.is_empty() {
+        return Err(LogError::empty(path, &log.info));
+    }
+    Ok(log)
+}
+
+/// Reads a whole CARMEN log into memory, plain or bzip2-compressed. To match a long log in
+/// bounded memory, iterate a [`CarmenReader`] instead.
+pub fn read_carmen(path: &Path, opts: &CarmenOptions) -> Result<CarmenLog, LogError> {
+    let mut reader = super::open_text(path)?;
+    read_carmen_from(&mut reader, &path.display().to_string(), opts)
+}
+
+/// Reads a whole CARMEN log from any reader (already decompressed); `name` is used in errors.
+pub fn read_carmen_from<R: BufRead + ?Sized>(
+    reader: &mut R,
+    name: &str,
+    opts: &CarmenOptions,
+) -> Result<CarmenLog, LogError> {
+    let mut stream = CarmenReader::new(reader, name, opts)?;
+    stream.keep_side_records = true;
+    let mut records = Vec::new();
+    for record in &mut stream {
+        records.push(record?);
+    }
+    let mut odometry = std::mem::take(&mut stream.odometry);
+    let mut truepos = std::mem::take(&mut stream.all_truepos);
+    odometry.sort_by(|a, b| a.0.total_cmp(&b.0));
+    truepos.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(CarmenLog {
+        records,
+        odometry,
+        truepos,
+        info: stream.info,
+    })
+}
+
+/// A laser record waiting in the reorder buffer, ordered by time and then by line.
+struct Pending {
+    timestamp: f64,
+    line: usize,
+    record: Record,
+}
+
+impl PartialEq for Pending {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other).is_eq()
+    }
+}
+impl Eq for Pending {}
+impl PartialOrd for Pending {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Pending {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.timestamp
+            .total_cmp(&other.timestamp)
+            .then(self.line.cmp(&other.line))
+    }
+}
+
+/// Streams the laser records of a CARMEN log in time order, one at a time, in memory bounded
+/// by the reorder window (not by the log's length).
+///
+/// Laser lines out of time order (Intel's jitter by up to 0.6 s) are put back in order within
+/// [`CarmenOptions::reorder_window`] seconds or [`CarmenOptions::reorder_records`] records,
+/// whichever fills first; a line later than that is dropped and counted in [`LogInfo::late`].
+/// Within the window the order is that of [`read_carmen`]: by time, ties in file order.
+/// `TRUEPOS` lines attach to the laser record nearest in time within
+/// [`CarmenOptions::truepos_max_dt`]. `PARAM`s that shape `FLASER` scans must come before the
+/// first `FLASER` line or repeat its values; a later change is an error, as the scans before
+/// it would have been read with another layout.
+///
+/// After an error the iterator ends.
+pub struct CarmenReader<R> {
+    reader: R,
+    name: String,
+    opts: CarmenOptions,
+    /// Counts, skips and `PARAM`s so far.
+    pub info: LogInfo,
+    buf: Vec<u8>,
+    line_no: usize,
+    pending: BinaryHeap<Reverse<Pending>>,
+    /// `TRUEPOS` lines not yet too old for the next record, in time order.
+    truepos: Vec<(f64, Pose2)>,
+    /// Latest timestamp of a laser or `TRUEPOS` line read.
+    newest: f64,
+    /// Timestamp of the last record delivered.
+    delivered: f64,
+    last_laser_time: f64,
+    /// The `FLASER` layout, fixed by the first `FLASER` line.
+    flaser: Option<FlaserSettings>,
+    done: bool,
+    /// Whether to keep every `ODOM` and `TRUEPOS` line ([`read_carmen`] does).
+    keep_side_records: bool,
+    odometry: Vec<(f64, Pose2)>,
+    all_truepos: Vec<(f64, Pose2)>,
+}
+
+impl<R> std::fmt::Debug for CarmenReader<R> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CarmenReader")
+            .field("name", &self.name)
+            .field("line", &self.line_no)
+            .field("pending", &self.pending.len())
+            .field("info", &self.info)
+            .finish_non_exhaustive()
+    }
+}
+
+impl CarmenReader<Box<dyn BufRead>> {
+    /// Opens a CARMEN log, plain or bzip2-compressed.
+    pub fn open(path: &Path, opts: &CarmenOptions) -> Result<Self, LogError> {
+        let reader = super::open_text(path)?;
+        Self::new(reader, &path.display().to_string(), opts)
+    }
+}
+
+impl<R: BufRead> CarmenReader<R> {
+    /// Streams a log from any reader (already decompressed); `name` is used in errors.
+    pub fn new(reader: R, name: &str, opts: &CarmenOptions) -> Result<Self, LogError> {
+        opts.validate()?;
+        Ok(Self {
+            reader,
+            name: name.to_string(),
+            opts: opts.clone(),
+            info: LogInfo::default(),
+            buf: Vec::with_capacity(4096),
+            line_no: 0,
+            pending: BinaryHeap::new(),
+            truepos: Vec::new(),
+            newest: f64::NEG_INFINITY,
+            delivered: f64::NEG_INFINITY,
+            last_laser_time: f64::NEG_INFINITY,
+            flaser: None,
+            done: false,
+            keep_side_records: false,
+            odometry: Vec::new(),
+            all_truepos: Vec::new(),
+        })
+    }
+
+    /// Counts a malformed line, or fails with it when strict.
+    fn skip(&mut self, err: LogError) -> Result<(), LogError> {
+        if !self.opts.lenient {
+            return Err(err);
+        }
+        self.info.skipped_lines += 1;
+        if self.info.skipped_examples.len() < SKIPPED_EXAMPLES {
+            self.info.skipped_examples.push(err.to_string());
+        }
+        Ok(())
+    }
+
+    /// Reads lines until one laser record is buffered or the input ends; `false` at the end.
+    fn read_some(&mut self) -> Result<bool, LogError> {
+        loop {
+            let more = next_line(&mut self.reader, &mut self.buf).map_err(|e| LogError::Io {
+                path: self.name.clone(),
+                source: e,
+            })?;
+            if !more {
+                return Ok(false);
+            }
+            self.line_no += 1;
+            if self.buf.contains(&b'\r') {
+                // A CR-only file reads as one huge line; say so rather than find no records.
+                let err = LogError::malformed(
+                    &self.name,
+                    self.line_no,
+                    "carriage return inside a line (CR-only line endings?); convert them to LF",
+                );
+                self.skip(err)?;
+                continue;
+            }
+            let Ok(line) = std::str::from_utf8(&self.buf) else {
+                let err = LogError::malformed(&self.name, self.line_no, "not UTF-8 text");
+                self.skip(err)?;
+                continue;
+            };
+            let mut tokens = line.split_ascii_whitespace();
+            let Some(kind) = tokens.next() else { continue };
+            if kind.starts_with('#') {
+                continue;
+            }
+            let kind = kind.to_string();
+            let fields: Vec<&str> = tokens.collect();
+            let max_beams = self.opts.max_beams;
+            let parsed = match kind.as_str() {
+                "FLASER" => parse_flaser(&fields, self.line_no, max_beams).map(Parsed::Laser),
+                "ROBOTLASER1" => {
+                    parse_robotlaser1(&fields, self.line_no, max_beams).map(Parsed::Laser)
+                }
+                "ODOM" => parse_odom(&fields).map(Parsed::Odom),
+                "TRUEPOS" => parse_truepos(&fields).map(Parsed::TruePos),
+                "PARAM" => parse_param(&fields).map(Parsed::Param),
+                other => {
+                    *self
+                        .info
+                        .unknown_types
+                        .entry(other.to_string())
+                        .or_insert(0) += 1;
+                    continue;
+                }
+            };
+            let parsed = match parsed {
+                Ok(p) => p,
+                Err(why) => {
+                    let err =
+                        LogError::malformed(&self.name, self.line_no, format!("{kind}: {why}"));
+                    self.skip(err)?;
+                    continue;
+                }
+            };
+            *self.info.counts.entry(kind).or_insert(0) += 1;
+            match parsed {
+                Parsed::Laser(raw) => {
+                    if self.push_laser(raw)? {
+                        return Ok(true);
+                    }
+                }
+                Parsed::Odom(o) => {
+                    if self.keep_side_records {
+                        self.odometry.push(o);
+                    }
+                }
+                Parsed::TruePos(t) => {
+                    self.newest = self.newest.max(t.0);
+                    let at = self.truepos.partition_point(|(s, _)| *s <= t.0);
+                    self.truepos.insert(at, t);
+                    if self.keep_side_records {
+                        self.all_truepos.push(t);
+                    }
+                }
+                Parsed::Param((k, v)) => self.set_param(k, v)?,
+            }
+        }
+    }
+
+    /// A `PARAM` line: kept, and checked against the `FLASER` layout already in use.
+    fn set_param(&mut self, key: String, value: String) -> Result<(), LogError> {
+        let shapes = FLASER_PARAMS.contains(&key.as_str());
+        self.info.params.insert(key.clone(), value.clone());
+        let Some(in_use) = self.flaser else {
+            return Ok(());
+        };
+        if !shapes {
+            return Ok(());
+        }
+        let now = flaser_settings(&self.info.params, &self.opts, &self.name)?;
+        if now != in_use {
+            return Err(LogError::malformed(
+                &self.name,
+                self.line_no,
+                format!(
+                    "PARAM {key} {value} changes the FLASER layout after FLASER lines were read \
+                     with another; CARMEN logs give their PARAMs before the first laser line"
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Turns a parsed laser line into a record and buffers it; `false` if it was skipped.
+    fn push_laser(&mut self, l: RawLaser) -> Result<bool, LogError> {
+        if l.timestamp < self.last_laser_time {
+            self.info.out_of_order += 1;
+        }
+        self.last_laser_time = l.timestamp;
+        if l.timestamp < self.delivered {
+            self.info.late += 1;
+            return Ok(false);
+        }
+        let (geometry, laser_offset) = match l.layout {
+            Layout::Flaser => {
+                let flaser = match self.flaser {
+                    Some(f) => f,
+                    None => {
+                        let f = flaser_settings(&self.info.params, &self.opts, &self.name)?;
+                        self.flaser = Some(f);
+                        f
+                    }
+                };
+                (
+                    flaser_geometry(
+                        l.ranges.len(),
+                        flaser.fov,
+                        flaser.max_range,
+                        self.opts.min_range,
+                    ),
+                    flaser.offset,
+                )
+            }
+            Layout::Robot {
+                angle_min,
+                angle_increment,
+                max_range,
+                laser_offset,
+            } => (
+                BeamGeometry {
+                    angle_min,
+                    angle_increment,
+                    max_range: self.opts.max_range.unwrap_or(max_range),
+                    min_range: self.opts.min_range,
+                },
+                laser_offset,
+            ),
+        };
+        match Scan::new(l.timestamp, geometry, l.ranges) {
+            Ok(scan) => {
+                self.newest = self.newest.max(l.timestamp);
+                self.pending.push(Reverse(Pending {
+                    timestamp: l.timestamp,
+                    line: l.line,
+                    record: Record {
+                        scan,
+                        odometry: l.odometry,
+                        truth: None,
+                        laser_offset,
+                    },
+                }));
+                Ok(true)
+            }
+            Err(e) => {
+                self.skip(LogError::malformed(&self.name, l.line, e.to_string()))?;
+                Ok(false)
+            }
+        }
+    }
+
+    /// Whether the earliest buffered record can go: nothing earlier can come any more.
+    fn ready(&self) -> bool {
+        self.pending.peek().is_some_and(|Reverse(p)| {
+            self.done
+                || self.newest - p.timestamp > self.opts.reorder_window
+                || self.pending.len() > self.opts.reorder_records
+        })
+    }
+
+    /// Delivers the earliest buffered record with its ground truth.
+    fn deliver(&mut self) -> Option<Record> {
+        let Reverse(p) = self.pending.pop()?;
+        let mut record = p.record;
+        let t = p.timestamp;
+        let max_dt = self.opts.truepos_max_dt;
+        record.truth = nearest(&self.truepos, t, max_dt).map(|(_, pose)| pose);
+        // Later records are no earlier than t: what lies beyond max_dt before it is done with.
+        let old = self.truepos.partition_point(|(s, _)| *s < t - max_dt);
+        self.truepos.drain(..old);
+        self.delivered = t;
+        self.info.records += 1;
+        self.info.span = Some(match self.info.span {
+            None => {
+                self.info.first_beams = record.scan.beams();
+                (t, t)
+            }
+            Some((first, _)) => (first, t),
+        });
+        Some(record)
+    }
+}
+
+impl<R: BufRead> Iterator for CarmenReader<R> {
+    type Item = Result<Record, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while !self.ready() {
+            if self.done {
+                return None;
+            }
+            match self.read_some() {
+                Ok(true) => {}
+                Ok(false) => self.done = true,
+                Err(e) => {
+                    self.done = true;
+                    self.pending.clear();
+                    return Some(Err(e));
+                }
+            }
+        }
+        self.deliver().map(Ok)
+    }
+}
+
+/// The `FLASER` layout in force: options, else `PARAM`s, else defaults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct FlaserSettings {
+    fov: f64,
+    max_range: f64,
+    offset: Pose2,
+}
+
+fn flaser_settings(
+    params: &BTreeMap<String, String>,
+    opts: &CarmenOptions,
+    name: &str,
+) -> Result<FlaserSettings, LogError> {
+    let param = |key: &str| -> Result<Option<f64>, LogError> {
+        match params.get(key) {
+            None => Ok(None),
+            Some(v) => match parse_f64(v) {
+                Some(x) if x.is_finite() => Ok(Some(x)),
+                _ => Err(bad_param(name, key, v, "not a finite number")),
+            },
+        }
+    };
+    let fov_deg = match opts.flaser_fov_deg {
+        Some(f) => f,
+        None => {
+            let fov = param("laser_front_laser_fov")?.unwrap_or(DEFAULT_FLASER_FOV_DEG);
+            if !(fov > 0.0 && fov <= 360.0) {
+                let v = &params["laser_front_laser_fov"];
+                return Err(bad_param(
+                    name,
+                    "laser_front_laser_fov",
+                    v,
+                    "must lie in (0, 360] degrees",
+                ));
+            }
+            fov
+        }
+    };
+    let max_range = match opts.max_range {
+        Some(m) => m,
+        None => {
+            let m = param("robot_front_laser_max")?.unwrap_or(DEFAULT_FLASER_MAX_RANGE);
+            if m <= 0.0 {
+                let v = &params["robot_front_laser_max"];
+                return Err(bad_param(
+                    name,
+                    "robot_front_laser_max",
+                    v,
+                    "must be positive",
+                ));
+            }
+            m
+        }
+    };
+    let offset = match opts.laser_offset {
+        Some(o) => o,
+        None => Pose2::new(
+            param("robot_frontlaser_offset")?.unwrap_or(0.0),
+            param("robot_frontlaser_side_offset")?.unwrap_or(0.0),
+            param("robot_frontlaser_angular_offset")?.unwrap_or(0.0),
+        ),
+    };
+    Ok(FlaserSettings {
+        fov: fov_deg.to_radians(),
+        max_range,
+        offset,
+    })
+}
+
+/// A `PARAM` whose value cannot describe the laser.
+fn bad_param(name: &str, key: &str, value: &str, why: &str) -> LogError {
+    LogError::Malformed {
+        path: name.to_string(),
+        line: 0,
+        why: format!("PARAM {key} {value}: {why}"),
+    }
+}
+
+/// The entry of `sorted` nearest in time to `t`, if within `max_dt`.
+fn nearest(sorted: &[(f64, Pose2)], t: f64, max_dt: f64) -> Option<(f64, Pose2)> {
+    let i = sorted.partition_point(|(s, _)| *s < t);
+    let before = i.checked_sub(1).map(|j| sorted[j]);
+    let after = sorted.get(i).copied();
+    let best = match (before, after) {
+        (Some(b), Some(a)) => {
+            if (t - b.0) <= (a.0 - t) {
+                Some(b)
+            } else {
+                Some(a)
+            }
+        }
+        (b, a) => b.or(a),
+    };
+    best.filter(|(s, _)| (s - t).abs() <= max_dt)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn intel_layout_is_carmens() {
+        let g = flaser_geometry(180, std::f64::consts::PI, 81.0, 0.0);
+        assert!((g.angle(0) + std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert!((g.angle(179) - 89f64.to_radians()).abs() < 1e-12);
+        let g = flaser_geometry(181, std::f64::consts::PI, 81.0, 0.0);
+        assert!((g.angle(180) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        let g = flaser_geometry(361, std::f64::consts::PI, 81.0, 0.0);
+        assert!((g.angle_increment - 0.5f64.to_radians()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn nearest_respects_the_window() {
+        let p = Pose2::IDENTITY;
+        let v = [(1.0, p), (2.0, p), (3.0, p)];
+        assert_eq!(nearest(&v, 2.04, 0.1).map(|x| x.0), Some(2.0));
+        assert_eq!(nearest(&v, 2.6, 0.1), None);
+        assert_eq!(nearest(&v, 0.95, 0.1).map(|x| x.0), Some(1.0));
+        assert_eq!(nearest(&v, 3.05, 0.1).map(|x| x.0), Some(3.0));
+        assert_eq!(nearest(&[], 3.05, 0.1), None);
+    }
+
+    #[test]
+    fn bad_options_are_refused() {
+        let o = CarmenOptions {
+            flaser_fov_deg: Some(-1.0),
+            ..CarmenOptions::default()
+        };
+        assert!(matches!(
+            o.validate(),
+            Err(LogError::InvalidOption {
+                name: "flaser_fov_deg",
+                ..
+            })
+        ));
+    }
+}

@@ -1,0 +1,254 @@
+//! Bad CARMEN input gets a clear error naming the line, or a counted skip, never a panic; the
+//! streaming reader gives the records of a whole-log sort in bounded memory.
+
+use qicp::logs::LogError;
+use qicp::logs::carmen::{CarmenOptions, CarmenReader, read_carmen_from};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+const STRICT: CarmenOptions = CarmenOptions {
+    lenient: false,
+    flaser_fov_deg: None,
+    max_range: None,
+    min_range: 0.0,
+    laser_offset: None,
+    truepos_max_dt: qicp::logs::carmen::DEFAULT_TRUEPOS_MAX_DT,
+    max_beams: qicp::logs::carmen::DEFAULT_MAX_BEAMS,
+    reorder_window: qicp::logs::carmen::DEFAULT_REORDER_WINDOW,
+    reorder_records: qicp::logs::carmen::DEFAULT_REORDER_RECORDS,
+};
+
+fn read(text: &str, opts: &CarmenOptions) -> Result<qicp::logs::carmen::CarmenLog, LogError> {
+    read_carmen_from(&mut text.as_bytes(), "test.clf", opts)
+}
+
+/// A `FLASER` line of `n` beams of 2 m at time `t`, odometry x = `x`.
+fn flaser(n: usize, t: f64, x: f64) -> String {
+    let ranges = vec!["2.0"; n].join(" ");
+    format!("FLASER {n} {ranges} {x} 0 0 {x} 0 0 {t} host {t}\n")
+}
+
+/// The error of a strict read, as text; panics if the read succeeds.
+fn refusal(text: &str) -> String {
+    match read(text, &STRICT) {
+        Ok(log) => panic!("accepted, {} records", log.records.len()),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn num_readings_near_usize_max_is_refused_not_a_panic() {
+    let line = "FLASER 18446744073709551615 1 2 3 0 0 0 0 0 0 1.0 host 1.0\n";
+    let why = refusal(line);
+    assert!(
+        why.contains("test.clf:1") && why.contains("beams per scan"),
+        "{why}"
+    );
+    // Lenient: skipped and counted, not a panic.
+    let log = read(
+        &format!("{line}{}", flaser(3, 2.0, 0.0)),
+        &CarmenOptions {
+            lenient: true,
+            ..STRICT
+        },
+    )
+    .expect("lenient read");
+    assert_eq!((log.records.len(), log.info.skipped_lines), (1, 1));
+}
+
+#[test]
+fn readings_above_max_beams_are_refused() {
+    let opts = CarmenOptions {
+        max_beams: 100,
+        ..STRICT
+    };
+    let why = read(&flaser(101, 1.0, 0.0), &opts)
+        .expect_err("101 beams over a limit of 100")
+        .to_string();
+    assert!(why.contains("101 readings") && why.contains("100"), "{why}");
+    assert!(read(&flaser(100, 1.0, 0.0), &opts).is_ok());
+}
+
+#[test]
+fn remission_count_near_usize_max_is_refused_not_a_panic() {
+    let line = "ROBOTLASER1 0 -1.5 3.0 1.0 80 0.01 0 3 1 1 1 18446744073709551615 \
+                0 0 0 0 0 0 0 0 0 0 0 5.0 host 5.0\n";
+    let why = refusal(line);
+    assert!(why.contains("remissions announced"), "{why}");
+}
+
+#[test]
+fn param_fov_outside_0_to_360_degrees_is_refused() {
+    for fov in ["0", "-180", "1e6", "nan"] {
+        let why = refusal(&format!(
+            "PARAM laser_front_laser_fov {fov} host 0\n{}",
+            flaser(3, 1.0, 0.0)
+        ));
+        assert!(why.contains("laser_front_laser_fov"), "fov {fov}: {why}");
+    }
+}
+
+#[test]
+fn param_max_range_that_is_not_positive_is_refused() {
+    let why = refusal(&format!(
+        "PARAM robot_front_laser_max -3 host 0\n{}",
+        flaser(3, 1.0, 0.0)
+    ));
+    assert!(why.contains("robot_front_laser_max"), "{why}");
+}
+
+#[test]
+fn robotlaser_angular_resolution_zero_is_refused() {
+    let line = "ROBOTLASER1 0 -1.5 3.0 0 80 0.01 0 3 1 1 1 0 \
+                0 0 0 0 0 0 0 0 0 0 0 5.0 host 5.0\n";
+    let why = refusal(line);
+    assert!(why.contains("angular_res"), "{why}");
+    // Beams spanning more than a full turn cannot be one sweep either.
+    let line = "ROBOTLASER1 0 -1.5 3.0 4 80 0.01 0 3 1 1 1 0 \
+                0 0 0 0 0 0 0 0 0 0 0 5.0 host 5.0\n";
+    assert!(refusal(line).contains("full turn"));
+}
+
+#[test]
+fn poses_beyond_the_map_coordinate_limit_are_refused() {
+    let why = refusal(&flaser(3, 1.0, 3e9));
+    assert!(why.contains("beyond"), "{why}");
+}
+
+#[test]
+fn cr_only_line_endings_are_reported_not_read_as_nothing() {
+    let text = flaser(3, 1.0, 0.0).replace('\n', "\r") + &flaser(3, 2.0, 0.0).replace('\n', "\r");
+    let why = refusal(&text);
+    assert!(why.contains("CR-only"), "{why}");
+}
+
+#[test]
+fn param_changing_the_flaser_layout_after_scans_is_an_error() {
+    let text = format!(
+        "{}PARAM laser_front_laser_fov 90 host 0\n{}",
+        flaser(3, 1.0, 0.0),
+        flaser(3, 2.0, 0.0)
+    );
+    let why = refusal(&text);
+    assert!(
+        why.contains("test.clf:2") && why.contains("changes the FLASER layout"),
+        "{why}"
+    );
+    // Repeating the value in force is harmless.
+    let text = format!(
+        "{}PARAM laser_front_laser_fov 180 host 0\n{}",
+        flaser(3, 1.0, 0.0),
+        flaser(3, 2.0, 0.0)
+    );
+    assert_eq!(read(&text, &STRICT).expect("same layout").records.len(), 2);
+}
+
+/// The brute-force twin of the streaming reader: laser lines jittered in time by less than
+/// the reorder window come out in the order of a stable sort by time, ties in file order.
+#[test]
+fn streaming_reader_gives_the_order_of_a_whole_log_sort() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for round in 0..20 {
+        let n = rng.random_range(1..400);
+        let mut text = String::new();
+        let mut expected = Vec::new();
+        for i in 0..n {
+            // 10 Hz with jitter up to ±1 s, and some repeated timestamps.
+            let mut t = 0.1 * i as f64 + rng.random_range(-1.0..1.0);
+            if rng.random_bool(0.1) {
+                t = (t * 2.0).round() / 2.0;
+            }
+            text += &flaser(3, t, i as f64);
+            expected.push((t, i as f64));
+        }
+        expected.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let opts = CarmenOptions {
+            reorder_window: 2.5,
+            ..STRICT
+        };
+        let got: Vec<(f64, f64)> = CarmenReader::new(text.as_bytes(), "jitter.clf", &opts)
+            .expect("reader")
+            .map(|r| {
+                let r = r.expect("record");
+                (r.timestamp(), r.odometry.x)
+            })
+            .collect();
+        assert_eq!(got, expected, "round {round}");
+    }
+}
+
+#[test]
+fn lines_later_than_the_reorder_window_are_dropped_and_counted() {
+    let mut text = String::new();
+    for i in 0..100 {
+        text += &flaser(3, i as f64 * 0.1, 0.0);
+    }
+    text += &flaser(3, 0.05, 0.0); // 9.9 s late
+    let mut reader = CarmenReader::new(text.as_bytes(), "late.clf", &STRICT).expect("reader");
+    let times: Vec<f64> = (&mut reader)
+        .map(|r| r.expect("record").timestamp())
+        .collect();
+    assert_eq!(times.len(), 100);
+    assert!(times.windows(2).all(|w| w[0] <= w[1]));
+    assert_eq!(reader.info.late, 1);
+    assert!(reader.info.report().contains("dropped 1 laser lines"));
+}
+
+#[test]
+fn reorder_buffer_stays_bounded_when_timestamps_stand_still() {
+    let mut text = String::new();
+    for i in 0..3000 {
+        text += &flaser(3, 1.0, i as f64);
+    }
+    let opts = CarmenOptions {
+        reorder_records: 50,
+        ..STRICT
+    };
+    let mut reader = CarmenReader::new(text.as_bytes(), "still.clf", &opts).expect("reader");
+    let first = reader.next().expect("a record").expect("record");
+    // The first record leaves once the buffer overflows, long before the end of the log.
+    let pending = format!("{reader:?}");
+    assert!(pending.contains("pending: 50"), "{pending}");
+    assert_eq!(first.odometry.x, 0.0);
+    let xs: Vec<f64> = reader.map(|r| r.expect("record").odometry.x).collect();
+    assert_eq!(xs.len(), 2999);
+    assert!(
+        xs.windows(2).all(|w| w[0] < w[1]),
+        "file order kept for equal times"
+    );
+}
+
+#[test]
+fn truepos_attaches_to_the_nearest_record_while_streaming() {
+    let mut text = String::new();
+    for i in 0..200 {
+        let t = i as f64 * 0.2;
+        text += &flaser(3, t, 0.0);
+        // Ground truth 50 ms after each scan, x = i.
+        let tt = t + 0.05;
+        text += &format!("TRUEPOS {i} 0 0 0 0 0 {tt} host {tt}\n");
+    }
+    let reader = CarmenReader::new(text.as_bytes(), "truth.clf", &STRICT).expect("reader");
+    for (i, r) in reader.enumerate() {
+        let truth = r.expect("record").truth.expect("truth attached");
+        assert_eq!(truth.x, i as f64);
+    }
+}
+
+#[test]
+fn an_error_ends_the_stream() {
+    let text = format!(
+        "{}FLASER 3 1 2\n{}",
+        flaser(3, 1.0, 0.0),
+        flaser(3, 2.0, 0.0)
+    );
+    let items: Vec<_> = CarmenReader::new(text.as_bytes(), "bad.clf", &STRICT)
+        .expect("reader")
+        .collect();
+    assert_eq!(items.len(), 1);
+    let why = items[0]
+        .as_ref()
+        .expect_err("the malformed line")
+        .to_string();
+    assert!(why.contains("bad.clf:2"), "{why}");
+}
