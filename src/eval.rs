@@ -35,6 +35,14 @@ pub enum EvalError {
         /// The association window (s).
         max_dt: f64,
     },
+    /// A streamed trajectory went back in time.
+    #[error("pose at {t} s comes after one at {previous} s: the trajectory must be in time order")]
+    OutOfOrder {
+        /// The pose's time (s).
+        t: f64,
+        /// The previous pose's time (s).
+        previous: f64,
+    },
     /// A parameter is not usable.
     #[error("`{name}` is {value}: {why}")]
     BadParameter {
@@ -193,6 +201,82 @@ pub fn relation_errors(
     Ok((errors, missing))
 }
 
+/// Picks from a trajectory streamed in time order the poses that relations need, so that a
+/// long run is scored in memory that grows with the relations, not with the poses.
+///
+/// [`RelationProbe::trajectory`] holds, for every relation time, the pose
+/// [`nearest_index`] would pick from the whole trajectory (the same tie rule), so
+/// [`evaluate_relations`] on it gives the figures of the whole trajectory.
+#[derive(Debug, Clone)]
+pub struct RelationProbe {
+    /// Relation times, sorted, without repeats.
+    times: Vec<f64>,
+    /// Best pose so far for each time.
+    best: Vec<Option<Stamped>>,
+    /// First time a later pose can still improve.
+    lo: usize,
+    max_dt: f64,
+    last: f64,
+}
+
+impl RelationProbe {
+    /// A probe for `relations`, taking poses within `max_dt` of their times.
+    pub fn new(relations: &[Relation], max_dt: f64) -> Result<Self, EvalError> {
+        check_max_dt(max_dt)?;
+        let mut times: Vec<f64> = relations.iter().flat_map(|r| [r.t1, r.t2]).collect();
+        times.sort_by(f64::total_cmp);
+        times.dedup();
+        Ok(Self {
+            best: vec![None; times.len()],
+            times,
+            lo: 0,
+            max_dt,
+            last: f64::NEG_INFINITY,
+        })
+    }
+
+    /// Offers the next pose of the trajectory; poses must come in time order.
+    pub fn push(&mut self, t: f64, pose: Pose2) -> Result<(), EvalError> {
+        if t < self.last || t.is_nan() {
+            return Err(EvalError::OutOfOrder {
+                t,
+                previous: self.last,
+            });
+        }
+        self.last = t;
+        while self.lo < self.times.len() && self.times[self.lo] < t - self.max_dt {
+            self.lo += 1;
+        }
+        for i in self.lo..self.times.len() {
+            let want = self.times[i];
+            if want > t + self.max_dt {
+                break;
+            }
+            let d = (t - want).abs();
+            let better = match self.best[i] {
+                None => true,
+                // As `nearest_index`: the last pose before `want` wins a tie with one after.
+                Some((s, _)) => {
+                    let held = (s - want).abs();
+                    if t < want { d <= held } else { d < held }
+                }
+            };
+            if better {
+                self.best[i] = Some((t, pose));
+            }
+        }
+        Ok(())
+    }
+
+    /// The poses picked, in time order.
+    #[must_use]
+    pub fn trajectory(&self) -> Vec<Stamped> {
+        let mut picked: Vec<Stamped> = self.best.iter().flatten().copied().collect();
+        picked.dedup_by(|a, b| a.0 == b.0 && a.1 == b.1);
+        picked
+    }
+}
+
 /// Scores a trajectory with benchmark relations: mean, standard deviation and maximum of the
 /// translational and rotational errors. With no relation evaluated the statistics are NaN.
 pub fn evaluate_relations(
@@ -304,8 +388,25 @@ pub fn associate(
         (&*truth, &*est)
     };
     let mut pairs = Vec::with_capacity(short.len());
-    for (t, p) in short {
-        match nearest_index(long, *t, max_dt) {
+    let mut rank = 0usize;
+    for (k, (t, p)) in short.iter().enumerate() {
+        // The k-th of equal timestamps pairs with the k-th of the other's, where it has as
+        // many: a trajectory with repeated times compared with itself pairs each pose with
+        // itself.
+        rank = if k > 0 && short[k - 1].0 == *t {
+            rank + 1
+        } else {
+            0
+        };
+        let nearest = nearest_index(long, *t, max_dt).map(|j| {
+            if long[j].0 == *t {
+                let repeats = long[j..].partition_point(|(s, _)| s <= t);
+                j + rank.min(repeats - 1)
+            } else {
+                j
+            }
+        });
+        match nearest {
             Some(j) if est_shorter => pairs.push((*p, long[j].1)),
             Some(j) => pairs.push((long[j].1, *p)),
             None => {}
@@ -503,6 +604,16 @@ pub fn run(c: EvalCommand) -> Result<()> {
             } else {
                 println!("{}", relations_table(&r));
             }
+            if r.n == 0 {
+                anyhow::bail!(
+                    "no relation of {} has poses within {} s in {} ({} relations): is it the \
+                     trajectory's relations file?",
+                    a.relations.display(),
+                    a.max_dt,
+                    a.traj.display(),
+                    rels.len()
+                );
+            }
         }
         EvalCommand::Ate(a) => {
             let est = load_trajectory(&a.est, LogPoses::Odometry)?;
@@ -566,6 +677,71 @@ fn ate_table(r: &AteReport) -> String {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    /// The probe is the streaming twin of scoring the whole trajectory: on seeded random
+    /// trajectories (with repeated timestamps and exact ties) and relations, the figures agree.
+    #[test]
+    fn relation_probe_scores_like_the_whole_trajectory() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for round in 0..50 {
+            let n = rng.random_range(1..300);
+            let mut t = 0.0;
+            let traj: Vec<Stamped> = (0..n)
+                .map(|_| {
+                    // Steps of 0, 0.05 or 0.1 s: repeats and ties at half steps.
+                    t += 0.05 * rng.random_range(0..3) as f64;
+                    let pose = Pose2::new(rng.random(), rng.random(), rng.random());
+                    (t, pose)
+                })
+                .collect();
+            let relations: Vec<Relation> = (0..rng.random_range(1..40))
+                .map(|_| {
+                    let at = |rng: &mut rand_chacha::ChaCha8Rng| {
+                        (rng.random_range(-0.5..t + 0.5) * 40.0).round() / 40.0
+                    };
+                    Relation {
+                        t1: at(&mut rng),
+                        t2: at(&mut rng),
+                        delta: Pose2::new(0.1, 0.0, 0.01),
+                    }
+                })
+                .collect();
+            let mut probe = RelationProbe::new(&relations, 0.1).unwrap();
+            for (t, p) in &traj {
+                probe.push(*t, *p).unwrap();
+            }
+            let whole = evaluate_relations(&traj, &relations, 0.1).unwrap();
+            let probed = evaluate_relations(&probe.trajectory(), &relations, 0.1).unwrap();
+            assert_eq!(format!("{whole:?}"), format!("{probed:?}"), "round {round}");
+            assert!(probe.trajectory().len() <= 2 * relations.len());
+        }
+    }
+
+    #[test]
+    fn ate_of_a_trajectory_with_repeated_times_against_itself_is_zero() {
+        let traj: Vec<Stamped> = (0..40)
+            .map(|i| {
+                (
+                    (i / 4) as f64,
+                    Pose2::new(i as f64, (i % 3) as f64, 0.1 * i as f64),
+                )
+            })
+            .collect();
+        let report = evaluate_ate(&traj, &traj, &AteOptions::default()).unwrap();
+        assert_eq!(report.ate_max_m, 0.0);
+        assert_eq!(report.missing, 0);
+    }
+
+    #[test]
+    fn relation_probe_refuses_poses_out_of_time_order() {
+        let mut probe = RelationProbe::new(&[], 0.1).unwrap();
+        probe.push(2.0, Pose2::IDENTITY).unwrap();
+        assert!(matches!(
+            probe.push(1.0, Pose2::IDENTITY),
+            Err(EvalError::OutOfOrder { .. })
+        ));
+    }
 
     /// A drive along a gently curving path, one pose every 0.1 s.
     fn drive(n: usize) -> Vec<Stamped> {

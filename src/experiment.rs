@@ -166,6 +166,25 @@ pub struct SourceConfig {
     pub lenient: bool,
 }
 
+impl SourceConfig {
+    /// The drive of a `sim` source at `sim`, with the source's seeds and length applied.
+    pub fn drive(&self, sim: &Path) -> Result<qicp_sim::SimConfig> {
+        let mut cfg = qicp_sim::SimConfig::load(sim)
+            .with_context(|| format!("loading drive {}", sim.display()))?;
+        if let Some(seed) = self.seed {
+            cfg.drive.seed = seed;
+        }
+        if let Some(seed) = self.world_seed {
+            cfg.world.seed = seed;
+        }
+        if self.max_scans.is_some() {
+            cfg.drive.max_scans = self.max_scans;
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
 /// `[run]`: what runs over the records.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -376,18 +395,7 @@ impl Source {
     /// Simulates the drive or reads the log the config names.
     pub fn load(c: &SourceConfig) -> Result<Self> {
         let (name, mut records, mut truth) = if let Some(sim) = &c.sim {
-            let mut cfg = qicp_sim::SimConfig::load(sim)
-                .with_context(|| format!("loading drive {}", sim.display()))?;
-            if let Some(seed) = c.seed {
-                cfg.drive.seed = seed;
-            }
-            if let Some(seed) = c.world_seed {
-                cfg.world.seed = seed;
-            }
-            if c.max_scans.is_some() {
-                cfg.drive.max_scans = c.max_scans;
-            }
-            cfg.validate()?;
+            let cfg = c.drive(sim)?;
             let (records, _, _) = qicp_sim::Simulation::run(cfg)
                 .with_context(|| format!("simulating {}", sim.display()))?;
             (format!("sim:{}", sim.display()), records, None)
@@ -398,10 +406,10 @@ impl Source {
             };
             let read =
                 read_carmen(log, &opts).with_context(|| format!("reading {}", log.display()))?;
-            if read.skipped_lines > 0 {
+            if read.info.skipped_lines > 0 {
                 eprintln!(
                     "warning: skipped {} malformed lines of {}",
-                    read.skipped_lines,
+                    read.info.skipped_lines,
                     log.display()
                 );
             }

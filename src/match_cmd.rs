@@ -1,7 +1,10 @@
 //! `qicp match LOG --matcher KIND [--config FILE] --out DIR`.
 
-use crate::logs::carmen::load_for_command;
-use crate::matching::{run_matcher, write_run};
+use crate::eval::{RelationProbe, evaluate_relations};
+use crate::logs::LogError;
+use crate::logs::carmen::{CarmenOptions, CarmenReader};
+use crate::logs::relations::read_relations;
+use crate::matching::{MatchLoop, RunWriter, progress_spinner};
 use anyhow::{Context, Result, bail};
 use qicp_matchers::{MatcherConfig, MatcherKind};
 use std::path::PathBuf;
@@ -54,6 +57,9 @@ pub fn load_config(file: Option<&PathBuf>, kind: Option<MatcherKind>) -> Result<
     Ok(config)
 }
 
+/// How far (s) a trajectory pose may lie from a relation's time and still stand for it.
+const RELATIONS_MAX_DT: f64 = 0.1;
+
 /// Runs the command.
 pub fn run(args: MatchArgs) -> Result<()> {
     let config = load_config(args.config.as_ref(), args.matcher)?;
@@ -68,22 +74,68 @@ pub fn run(args: MatchArgs) -> Result<()> {
     let (Some(log_path), Some(out)) = (&args.log, &args.out) else {
         bail!("give a LOG and --out DIR (or --subscribe)");
     };
-    let log = load_for_command(log_path, args.lenient)?;
-    let run = run_matcher(&log.records, &config, true)?;
-    write_run(out, &run, &config)?;
-    let mut summary = serde_json::to_value(&run.summary)?;
-    summary["skipped_lines"] = log.skipped_lines.into();
-    if let Some(path) = &args.relations {
-        let relations = crate::logs::relations::read_relations(path)?;
-        let report = crate::eval::evaluate_relations(&run.trajectory, &relations, 0.1)?;
+    // Everything that can be refused is checked before the first scan is matched.
+    let relations = args
+        .relations
+        .as_ref()
+        .map(|p| read_relations(p))
+        .transpose()?;
+    let mut probe = relations
+        .as_ref()
+        .map(|r| RelationProbe::new(r, RELATIONS_MAX_DT))
+        .transpose()?;
+    let options = CarmenOptions {
+        lenient: args.lenient,
+        ..CarmenOptions::default()
+    };
+    let mut reader = CarmenReader::open(log_path, &options)?;
+    let mut writer = RunWriter::create(out)?;
+    let mut matcher = MatchLoop::new(&config)?;
+
+    // Scan by scan: memory holds the matcher's map and the reorder window, not the log.
+    let bar = progress_spinner(config.kind.name());
+    for record in &mut reader {
+        let record = record?;
+        let (estimate, row) = matcher.push(&record);
+        writer.push(record.timestamp(), &estimate.pose, &row)?;
+        if let Some(probe) = &mut probe {
+            probe.push(record.timestamp(), estimate.pose)?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    reader.info.warn(log_path);
+    if reader.info.records == 0 {
+        return Err(LogError::empty(log_path, &reader.info).into());
+    }
+
+    let mut summary = serde_json::to_value(matcher.summary())?;
+    summary["skipped_lines"] = reader.info.skipped_lines.into();
+    summary["late_lines"] = reader.info.late.into();
+    let mut unscored = None;
+    if let (Some(relations), Some(probe), Some(path)) = (&relations, &probe, &args.relations) {
+        let report = evaluate_relations(&probe.trajectory(), relations, RELATIONS_MAX_DT)?;
+        if report.n == 0 {
+            unscored = Some(format!(
+                "no relation of {} has poses within {RELATIONS_MAX_DT} s in the run ({} \
+                 relations, log from {:.3} to {:.3} s): is it the log's relations file?",
+                path.display(),
+                relations.len(),
+                reader.info.span.map_or(f64::NAN, |s| s.0),
+                reader.info.span.map_or(f64::NAN, |s| s.1),
+            ));
+        }
         summary["relations"] = serde_json::to_value(report)?;
     }
     let text = serde_json::to_string_pretty(&summary)?;
-    std::fs::write(out.join("summary.json"), &text)?;
+    writer.commit(&config, Some(&text))?;
     if args.json {
         println!("{text}");
     } else {
         eprintln!("{text}");
+    }
+    if let Some(why) = unscored {
+        bail!(why);
     }
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! Running a matcher over a sequence of records: the loop behind `qicp match`, `qicp run`
 //! and the bridge's matcher process.
 
-use crate::logs::tum::{Stamped, write_tum};
+use crate::logs::tum::{Stamped, write_tum_pose};
 use anyhow::{Context, Result};
 use qicp_core::{Fallback, Record};
 use qicp_matchers::{Check, Estimate, MatcherConfig, Odometry};
@@ -98,15 +98,6 @@ pub fn quantile(values: &[f64], q: f64) -> f64 {
     v[rank - 1]
 }
 
-fn mean(values: impl Iterator<Item = f64>) -> f64 {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for v in values.filter(|v| v.is_finite()) {
-        sum += v;
-        n += 1;
-    }
-    if n == 0 { f64::NAN } else { sum / n as f64 }
-}
-
 /// A progress bar on a terminal, nothing otherwise (CI, pipes).
 #[must_use]
 pub fn progress_bar(len: usize, label: &str) -> indicatif::ProgressBar {
@@ -125,41 +116,182 @@ pub fn progress_bar(len: usize, label: &str) -> indicatif::ProgressBar {
     bar
 }
 
-/// A matcher consuming records one at a time (in time order), keeping the trajectory and the
-/// per-scan figures: the loop behind every command, in-process or fed by the bridge.
+/// Log-spaced histogram of per-scan times: quantiles within [`TimeHistogram::RELATIVE_ERROR`]
+/// in memory that does not grow with the number of scans.
+#[derive(Debug, Clone)]
+pub struct TimeHistogram {
+    counts: Vec<u64>,
+    total: u64,
+}
+
+impl Default for TimeHistogram {
+    fn default() -> Self {
+        Self {
+            counts: vec![0; Self::bins()],
+            total: 0,
+        }
+    }
+}
+
+impl TimeHistogram {
+    /// Smallest time binned apart (ms); anything below lands in the first bin.
+    const MIN_MS: f64 = 1e-4;
+    /// Largest time binned apart (ms); anything above lands in the last bin.
+    const MAX_MS: f64 = 1e7;
+    /// Ratio of a bin's upper to its lower edge.
+    const RATIO: f64 = 1.01;
+    /// Largest relative error of a quantile inside the binned range (half a bin).
+    pub const RELATIVE_ERROR: f64 = 0.005;
+
+    fn bins() -> usize {
+        ((Self::MAX_MS / Self::MIN_MS).ln() / Self::RATIO.ln()).ceil() as usize + 1
+    }
+
+    /// Adds one time (ms); NaN and negative values are ignored.
+    pub fn add(&mut self, ms: f64) {
+        if ms.is_nan() || ms < 0.0 {
+            return;
+        }
+        let last = self.counts.len() - 1;
+        let bin = ((ms.max(Self::MIN_MS) / Self::MIN_MS).ln() / Self::RATIO.ln()).floor();
+        self.counts[(bin.max(0.0) as usize).min(last)] += 1;
+        self.total += 1;
+    }
+
+    /// The `q`-quantile by nearest rank, as [`quantile`] takes it, at the bin's geometric
+    /// centre; NaN for no times.
+    #[must_use]
+    pub fn quantile(&self, q: f64) -> f64 {
+        if self.total == 0 {
+            return f64::NAN;
+        }
+        let rank = ((q * self.total as f64).ceil() as u64).clamp(1, self.total);
+        let mut seen = 0;
+        for (i, &c) in self.counts.iter().enumerate() {
+            seen += c;
+            if seen >= rank {
+                return Self::MIN_MS * Self::RATIO.powf(i as f64 + 0.5);
+            }
+        }
+        f64::NAN
+    }
+}
+
+/// Running totals of a run, from which [`MatchSummary`] is made: bounded memory whatever the
+/// number of scans.
+#[derive(Debug, Clone, Default)]
+struct RunTotals {
+    scans: usize,
+    times: TimeHistogram,
+    residual: (f64, usize),
+    certainty: (f64, usize),
+    sigma: (f64, usize),
+    fallbacks: usize,
+    reasons: std::collections::BTreeMap<String, usize>,
+    inserted: usize,
+    searched: usize,
+    recovered: usize,
+    refused: usize,
+}
+
+impl RunTotals {
+    fn add(&mut self, r: &ScanRow) {
+        let sum = |acc: &mut (f64, usize), v: f64| {
+            if v.is_finite() {
+                acc.0 += v;
+                acc.1 += 1;
+            }
+        };
+        self.scans += 1;
+        self.times.add(r.ms);
+        sum(&mut self.residual, r.residual_mm);
+        sum(&mut self.certainty, r.certainty);
+        sum(&mut self.sigma, r.sigma_mm);
+        if let Some(f) = r.fallback {
+            self.fallbacks += 1;
+            let key = match f {
+                Fallback::TooFewPoints { .. } => "too_few_points",
+                Fallback::TooFewCorrespondences { .. } => "too_few_correspondences",
+                Fallback::EmptyReference => "empty_reference",
+                Fallback::Degenerate => "degenerate",
+                Fallback::Refused => "refused",
+            };
+            *self.reasons.entry(key.to_string()).or_insert(0) += 1;
+        }
+        self.inserted += usize::from(r.inserted);
+        self.searched += usize::from(r.check.searched);
+        self.recovered += usize::from(r.check.recovered);
+        self.refused += usize::from(r.check.refused);
+    }
+
+    fn summary(&self, matcher: &str, busy: std::time::Duration, map_points: usize) -> MatchSummary {
+        let mean = |(sum, n): (f64, usize)| if n == 0 { f64::NAN } else { sum / n as f64 };
+        MatchSummary {
+            matcher: matcher.to_string(),
+            scans: self.scans,
+            ms_per_scan_median: self.times.quantile(0.5),
+            ms_per_scan_p99: self.times.quantile(0.99),
+            wall_seconds: busy.as_secs_f64(),
+            map_points,
+            residual_mean_mm: mean(self.residual),
+            certainty_mean: mean(self.certainty),
+            sigma_mean_mm: mean(self.sigma),
+            fallbacks: self.fallbacks,
+            fallback_reasons: self.reasons.clone(),
+            inserted: self.inserted,
+            searched: self.searched,
+            recovered: self.recovered,
+            refused: self.refused,
+        }
+    }
+}
+
+/// A spinner counting scans on a terminal (for streams of unknown length), nothing otherwise.
+#[must_use]
+pub fn progress_spinner(label: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new_spinner();
+    let style =
+        indicatif::ProgressStyle::with_template("{prefix:>8} {spinner} {pos} scans {per_sec}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner());
+    bar.set_style(style);
+    bar.set_prefix(label.to_string());
+    bar
+}
+
+/// A matcher consuming records one at a time (in time order) and keeping running totals:
+/// the loop behind every command, in-process or fed by the bridge. Memory does not grow with
+/// the number of scans beyond the matcher's own reference; [`Matching`] keeps the trajectory
+/// and rows as well.
 #[derive(Debug)]
-pub struct Matching {
+pub struct MatchLoop {
     kind: String,
     odometry: Box<dyn Odometry>,
-    trajectory: Vec<Stamped>,
-    rows: Vec<ScanRow>,
+    totals: RunTotals,
     busy: std::time::Duration,
 }
 
-impl Matching {
+impl MatchLoop {
     /// A fresh run of the matcher `config` describes.
     pub fn new(config: &MatcherConfig) -> Result<Self> {
         Ok(Self {
             kind: config.kind.name().to_string(),
             odometry: config.build()?,
-            trajectory: Vec::new(),
-            rows: Vec::new(),
+            totals: RunTotals::default(),
             busy: std::time::Duration::ZERO,
         })
     }
 
-    /// Matches one record and returns the estimate.
-    pub fn push(&mut self, record: &Record) -> Estimate {
+    /// Matches one record: the estimate and its row of `matches.csv`.
+    pub fn push(&mut self, record: &Record) -> (Estimate, ScanRow) {
         let t0 = Instant::now();
         let estimate = self.odometry.process(record);
         let elapsed = t0.elapsed();
         self.busy += elapsed;
-        let Estimate {
-            pose,
-            result,
-            inserted,
-            check,
-        } = estimate;
+        let result = &estimate.result;
         // A fallback has no residual or covariance of its own.
         let (residual_mm, certainty, sigma_mm) = if result.fallback.is_none() {
             (
@@ -170,8 +302,7 @@ impl Matching {
         } else {
             (f64::NAN, f64::NAN, f64::NAN)
         };
-        self.trajectory.push((record.timestamp(), pose));
-        self.rows.push(ScanRow {
+        let row = ScanRow {
             timestamp: record.timestamp(),
             iterations: result.iterations,
             correspondences: result.correspondences,
@@ -179,51 +310,67 @@ impl Matching {
             certainty,
             sigma_mm,
             ms: elapsed.as_secs_f64() * 1e3,
-            inserted,
+            inserted: estimate.inserted,
             fallback: result.fallback,
-            check,
-        });
+            check: estimate.check,
+        };
+        self.totals.add(&row);
+        (estimate, row)
+    }
+
+    /// The totals so far.
+    #[must_use]
+    pub fn summary(&self) -> MatchSummary {
+        self.totals.summary(
+            &self.kind,
+            self.busy,
+            self.odometry.reference_points().len(),
+        )
+    }
+
+    /// Ends the run: totals and the pipeline (with its map).
+    #[must_use]
+    pub fn finish(self) -> (MatchSummary, Box<dyn Odometry>) {
+        (self.summary(), self.odometry)
+    }
+}
+
+/// A [`MatchLoop`] that keeps the whole trajectory and every row in memory, for experiments,
+/// sweeps and figures.
+#[derive(Debug)]
+pub struct Matching {
+    inner: MatchLoop,
+    trajectory: Vec<Stamped>,
+    rows: Vec<ScanRow>,
+}
+
+impl Matching {
+    /// A fresh run of the matcher `config` describes.
+    pub fn new(config: &MatcherConfig) -> Result<Self> {
+        Ok(Self {
+            inner: MatchLoop::new(config)?,
+            trajectory: Vec::new(),
+            rows: Vec::new(),
+        })
+    }
+
+    /// Matches one record and returns the estimate.
+    pub fn push(&mut self, record: &Record) -> Estimate {
+        let (estimate, row) = self.inner.push(record);
+        self.trajectory.push((record.timestamp(), estimate.pose));
+        self.rows.push(row);
         estimate
     }
 
     /// Ends the run: totals and the pipeline (with its map).
     #[must_use]
     pub fn finish(self) -> MatchRun {
-        let rows = self.rows;
-        let times: Vec<f64> = rows.iter().map(|r| r.ms).collect();
-        let mut reasons = std::collections::BTreeMap::new();
-        for f in rows.iter().filter_map(|r| r.fallback) {
-            let key = match f {
-                Fallback::TooFewPoints { .. } => "too_few_points",
-                Fallback::TooFewCorrespondences { .. } => "too_few_correspondences",
-                Fallback::EmptyReference => "empty_reference",
-                Fallback::Degenerate => "degenerate",
-                Fallback::Refused => "refused",
-            };
-            *reasons.entry(key.to_string()).or_insert(0) += 1;
-        }
-        let summary = MatchSummary {
-            matcher: self.kind,
-            scans: rows.len(),
-            ms_per_scan_median: quantile(&times, 0.5),
-            ms_per_scan_p99: quantile(&times, 0.99),
-            wall_seconds: self.busy.as_secs_f64(),
-            map_points: self.odometry.reference_points().len(),
-            residual_mean_mm: mean(rows.iter().map(|r| r.residual_mm)),
-            certainty_mean: mean(rows.iter().map(|r| r.certainty)),
-            sigma_mean_mm: mean(rows.iter().map(|r| r.sigma_mm)),
-            fallbacks: rows.iter().filter(|r| r.fallback.is_some()).count(),
-            fallback_reasons: reasons,
-            inserted: rows.iter().filter(|r| r.inserted).count(),
-            searched: rows.iter().filter(|r| r.check.searched).count(),
-            recovered: rows.iter().filter(|r| r.check.recovered).count(),
-            refused: rows.iter().filter(|r| r.check.refused).count(),
-        };
+        let (summary, odometry) = self.inner.finish();
         MatchRun {
             trajectory: self.trajectory,
-            rows,
+            rows: self.rows,
             summary,
-            odometry: self.odometry,
+            odometry,
         }
     }
 }
@@ -260,42 +407,170 @@ fn check_label(check: &Check) -> &'static str {
 
 /// Writes `matches.csv`.
 pub fn write_rows<W: Write>(mut w: W, rows: &[ScanRow]) -> std::io::Result<()> {
-    writeln!(
-        w,
-        "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm,\
-         inlier_share,check"
-    )?;
+    write_rows_header(&mut w)?;
     for r in rows {
-        writeln!(
-            w,
-            "{},{},{},{:.4},{:.6e},{:.4},{},{},{:.4},{:.4},{}",
-            r.timestamp,
-            r.iterations,
-            r.correspondences,
-            r.residual_mm,
-            r.certainty,
-            r.ms,
-            u8::from(r.inserted),
-            r.fallback.map(|f| f.to_string()).unwrap_or_default(),
-            r.sigma_mm,
-            r.check.inlier_share,
-            check_label(&r.check),
-        )?;
+        write_row(&mut w, r)?;
     }
     Ok(())
 }
 
-/// Writes `trajectory.tum`, `matches.csv` and `config.toml` of a run into `dir`.
-pub fn write_run(dir: &Path, run: &MatchRun, config: &MatcherConfig) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let create = |name: &str| -> Result<std::io::BufWriter<std::fs::File>> {
-        let path = dir.join(name);
-        Ok(std::io::BufWriter::new(
-            std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?,
-        ))
+/// The header line of `matches.csv`.
+fn write_rows_header<W: Write>(w: &mut W) -> std::io::Result<()> {
+    writeln!(
+        w,
+        "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm,\
+         inlier_share,check"
+    )
+}
+
+/// One line of `matches.csv`.
+fn write_row<W: Write>(w: &mut W, r: &ScanRow) -> std::io::Result<()> {
+    writeln!(
+        w,
+        "{},{},{},{:.4},{:.6e},{:.4},{},{},{:.4},{:.4},{}",
+        r.timestamp,
+        r.iterations,
+        r.correspondences,
+        r.residual_mm,
+        r.certainty,
+        r.ms,
+        u8::from(r.inserted),
+        r.fallback.map(|f| f.to_string()).unwrap_or_default(),
+        r.sigma_mm,
+        r.check.inlier_share,
+        check_label(&r.check),
+    )
+}
+
+/// The output files of a run, written as the scans come and put in place only when the run
+/// is complete: each file is first written under a temporary name in the output directory and
+/// renamed at [`RunWriter::commit`]; a run that fails or is dropped leaves no partial file.
+///
+/// The directory is created and its files opened before any matching, so a bad `--out` fails
+/// at once.
+#[derive(Debug)]
+pub struct RunWriter {
+    dir: std::path::PathBuf,
+    trajectory: std::io::BufWriter<tempfile::NamedTempFile>,
+    matches: std::io::BufWriter<tempfile::NamedTempFile>,
+}
+
+impl RunWriter {
+    /// Creates `dir` if needed and opens the temporary files in it.
+    pub fn create(dir: &Path) -> Result<Self> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let temp = |name: &str| -> Result<std::io::BufWriter<tempfile::NamedTempFile>> {
+            let file = temp_builder(&format!(".{name}."))
+                .tempfile_in(dir)
+                .with_context(|| format!("cannot write {} in {}", name, dir.display()))?;
+            Ok(std::io::BufWriter::new(file))
+        };
+        let trajectory = temp("trajectory.tum")?;
+        let mut matches = temp("matches.csv")?;
+        write_rows_header(&mut matches).context("writing matches.csv")?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            trajectory,
+            matches,
+        })
+    }
+
+    /// Appends one scan's pose and row.
+    pub fn push(&mut self, timestamp: f64, pose: &qicp_core::Pose2, row: &ScanRow) -> Result<()> {
+        write_tum_pose(&mut self.trajectory, timestamp, pose).context("writing trajectory.tum")?;
+        write_row(&mut self.matches, row).context("writing matches.csv")?;
+        Ok(())
+    }
+
+    /// Writes `config.toml` and `summary.json` (when given) and renames every file into place.
+    pub fn commit(self, config: &MatcherConfig, summary: Option<&str>) -> Result<()> {
+        let persist = |w: std::io::BufWriter<tempfile::NamedTempFile>, name: &str| -> Result<()> {
+            let path = self.dir.join(name);
+            let file = w
+                .into_inner()
+                .map_err(|e| e.into_error())
+                .with_context(|| format!("writing {}", path.display()))?;
+            file.as_file()
+                .sync_data()
+                .with_context(|| format!("writing {}", path.display()))?;
+            file.persist(&path)
+                .map_err(|e| e.error)
+                .with_context(|| format!("renaming into {}", path.display()))?;
+            Ok(())
+        };
+        persist(self.trajectory, "trajectory.tum")?;
+        persist(self.matches, "matches.csv")?;
+        write_atomic(&self.dir.join("config.toml"), config.to_toml().as_bytes())?;
+        if let Some(text) = summary {
+            write_atomic(&self.dir.join("summary.json"), text.as_bytes())?;
+        }
+        Ok(())
+    }
+}
+
+/// Temporary files named `PREFIXXXXXXX`, with the permissions an ordinary file would get
+/// (0644 less the umask), not tempfile's private 0600: they become the outputs.
+fn temp_builder(prefix: &str) -> tempfile::Builder<'_, 'static> {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(prefix).permissions({
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::Permissions::from_mode(0o644)
+    });
+    builder
+}
+
+/// Writes a whole file under a temporary name beside it and renames it into place.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
     };
-    write_tum(create("trajectory.tum")?, &run.trajectory).context("writing trajectory.tum")?;
-    write_rows(create("matches.csv")?, &run.rows).context("writing matches.csv")?;
-    std::fs::write(dir.join("config.toml"), config.to_toml()).context("writing config.toml")?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+    let mut file = temp_builder(&format!(".{}.", name.as_deref().unwrap_or("out")))
+        .tempfile_in(dir)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    file.write_all(bytes)
+        .with_context(|| format!("writing {}", path.display()))?;
+    file.persist(path)
+        .map_err(|e| e.error)
+        .with_context(|| format!("renaming into {}", path.display()))?;
     Ok(())
+}
+
+/// Writes `trajectory.tum`, `matches.csv` and `config.toml` of a run into `dir`, each renamed
+/// into place when complete.
+pub fn write_run(dir: &Path, run: &MatchRun, config: &MatcherConfig) -> Result<()> {
+    let mut writer = RunWriter::create(dir)?;
+    for ((t, pose), row) in run.trajectory.iter().zip(&run.rows) {
+        writer.push(*t, pose, row)?;
+    }
+    writer.commit(config, None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The histogram is the bounded twin of the exact nearest-rank quantile: within half a bin.
+    #[test]
+    fn time_histogram_quantiles_are_within_half_a_bin_of_exact() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..20 {
+            let n = rng.random_range(1..5000);
+            let times: Vec<f64> = (0..n)
+                .map(|_| 10f64.powf(rng.random_range(-2.0..3.0)))
+                .collect();
+            let mut h = TimeHistogram::default();
+            times.iter().for_each(|&t| h.add(t));
+            for q in [0.0, 0.25, 0.5, 0.9, 0.99, 1.0] {
+                let (exact, binned) = (quantile(&times, q), h.quantile(q));
+                assert!(
+                    (binned / exact - 1.0).abs() <= TimeHistogram::RELATIVE_ERROR + 1e-9,
+                    "q {q}: {binned} vs {exact}"
+                );
+            }
+        }
+        assert!(TimeHistogram::default().quantile(0.5).is_nan());
+    }
 }

@@ -1,0 +1,243 @@
+//! `qicp match` on bad input: empty logs and unscored relations are errors, bad paths fail
+//! before matching, a failed run leaves no partial output, and the streaming run gives the
+//! trajectory of the in-memory one.
+
+use qicp::logs::carmen::{CarmenOptions, read_carmen};
+use qicp::logs::tum::write_tum;
+use qicp::matching::run_matcher;
+use qicp_matchers::{MatcherConfig, MatcherKind};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn qicp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(args)
+        .output()
+        .expect("runs qicp")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn scratch() -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix("qicp-match-reliability-")
+        .tempdir()
+        .expect("scratch dir")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("UTF-8 path")
+}
+
+/// A `FLASER` line of 181 beams at 2 m at time `t`.
+fn flaser(t: f64) -> String {
+    let ranges = vec!["2.0"; 181].join(" ");
+    format!("FLASER 181 {ranges} 0 0 0 0 0 0 {t} host {t}\n")
+}
+
+/// Writes `text` to `name` in `dir`.
+fn file(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("writes fixture");
+    path
+}
+
+/// A short simulated corridor drive (60 scans) as a CARMEN log.
+fn corridor_log(dir: &Path) -> PathBuf {
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/worlds/corridor.toml");
+    let o = qicp(&["sim", config, "--out", s(dir), "--max-scans", "60"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    dir.join("sim.log")
+}
+
+#[test]
+fn logs_without_laser_records_are_an_error() {
+    let dir = scratch();
+    for (name, text) in [
+        ("empty.clf", String::new()),
+        (
+            "odom-only.clf",
+            "ODOM 0 0 0 0 0 0 1.0 host 1.0\nODOM 1 0 0 0 0 0 2.0 host 2.0\n".to_string(),
+        ),
+        ("comments.clf", "# nothing but a comment\n".to_string()),
+    ] {
+        let log = file(dir.path(), name, &text);
+        let out = dir.path().join(format!("out-{name}"));
+        let o = qicp(&["match", s(&log), "--matcher", "wsm", "--out", s(&out)]);
+        assert!(!o.status.success(), "{name} accepted");
+        assert!(
+            stderr(&o).contains("no laser records"),
+            "{name}: {}",
+            stderr(&o)
+        );
+        assert!(
+            !out.join("trajectory.tum").exists(),
+            "{name}: output written"
+        );
+    }
+}
+
+#[test]
+fn bad_out_fails_before_the_log_is_matched() {
+    let dir = scratch();
+    // The log is malformed at its end: an error about it would mean the log was read first.
+    let log = file(
+        dir.path(),
+        "log.clf",
+        &format!("{}{}FLASER 3 1\n", flaser(1.0), flaser(2.0)),
+    );
+    let blocker = file(dir.path(), "a-file", "");
+    let out = blocker.join("out");
+    let o = qicp(&["match", s(&log), "--matcher", "wsm", "--out", s(&out)]);
+    assert!(!o.status.success());
+    let why = stderr(&o);
+    assert!(why.contains(s(&out)) && !why.contains("log.clf"), "{why}");
+}
+
+#[test]
+fn bad_relations_fail_before_the_log_is_matched() {
+    let dir = scratch();
+    let log = file(
+        dir.path(),
+        "log.clf",
+        &format!("{}{}FLASER 3 1\n", flaser(1.0), flaser(2.0)),
+    );
+    let out = dir.path().join("out");
+    let missing = dir.path().join("absent.relations");
+    let o = qicp(&[
+        "match",
+        s(&log),
+        "--matcher",
+        "wsm",
+        "--out",
+        s(&out),
+        "--relations",
+        s(&missing),
+    ]);
+    assert!(!o.status.success());
+    let why = stderr(&o);
+    assert!(
+        why.contains("absent.relations") && !why.contains("log.clf"),
+        "{why}"
+    );
+}
+
+#[test]
+fn a_failed_run_leaves_no_partial_output() {
+    let dir = scratch();
+    let mut text = String::new();
+    for i in 0..20 {
+        text += &flaser(i as f64 * 0.1);
+    }
+    text += "FLASER 3 1\n";
+    let log = file(dir.path(), "log.clf", &text);
+    let out = dir.path().join("out");
+    let o = qicp(&["match", s(&log), "--matcher", "wsm", "--out", s(&out)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("log.clf:21"), "{}", stderr(&o));
+    let left: Vec<_> = std::fs::read_dir(&out)
+        .expect("out dir")
+        .map(|e| e.expect("entry").file_name())
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+#[test]
+fn relations_outside_the_log_are_an_error() {
+    let dir = scratch();
+    let log = corridor_log(&dir.path().join("sim"));
+    let relations = file(
+        dir.path(),
+        "far.relations",
+        "1000000 1000001 0.1 0 0 0 0 0\n1000002 1000003 0.1 0 0 0 0 0\n",
+    );
+    let out = dir.path().join("out");
+    let o = qicp(&[
+        "match",
+        s(&log),
+        "--matcher",
+        "wsm",
+        "--out",
+        s(&out),
+        "--relations",
+        s(&relations),
+    ]);
+    assert!(!o.status.success(), "no relation scored, yet exit 0");
+    assert!(stderr(&o).contains("no relation of"), "{}", stderr(&o));
+    // The run itself is complete and kept.
+    assert!(out.join("trajectory.tum").exists());
+}
+
+#[test]
+fn iteration_counts_without_an_upper_bound_are_refused() {
+    let dir = scratch();
+    let config = file(
+        dir.path(),
+        "c.toml",
+        "[matcher]\nkind = \"wsm\"\n[matcher.icp]\nmax_iterations = 4294967295\n",
+    );
+    let log = file(dir.path(), "log.clf", &flaser(1.0));
+    let out = dir.path().join("out");
+    let o = qicp(&["match", s(&log), "--config", s(&config), "--out", s(&out)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("max_iterations"), "{}", stderr(&o));
+}
+
+/// The streaming command and the in-memory loop are twins: same log, same trajectory.
+#[test]
+fn streaming_match_gives_the_in_memory_trajectory() {
+    let dir = scratch();
+    let log = corridor_log(&dir.path().join("sim"));
+    let out = dir.path().join("out");
+    let o = qicp(&["match", s(&log), "--matcher", "q-wsm", "--out", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let records = read_carmen(&log, &CarmenOptions::default())
+        .expect("log")
+        .records;
+    let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
+    config.fill_defaults();
+    let run = run_matcher(&records, &config, false).expect("run");
+    let mut expected = Vec::new();
+    write_tum(&mut expected, &run.trajectory).expect("TUM");
+    let streamed = std::fs::read(out.join("trajectory.tum")).expect("trajectory");
+    assert_eq!(streamed, expected);
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).expect("summary"))
+            .expect("JSON");
+    assert_eq!(summary["scans"], records.len());
+    assert_eq!(summary["map_points"], run.summary.map_points);
+}
+
+#[test]
+fn eval_relations_with_none_inside_the_trajectory_is_an_error() {
+    let dir = scratch();
+    let traj = file(
+        dir.path(),
+        "t.tum",
+        "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 2 0 0 0 0 0 1\n",
+    );
+    let relations = file(dir.path(), "far.relations", "500 501 1 0 0 0 0 0\n");
+    let o = qicp(&["eval", "relations", s(&traj), s(&relations), "--json"]);
+    assert!(!o.status.success(), "n = 0 yet exit 0");
+    assert!(stderr(&o).contains("no relation of"), "{}", stderr(&o));
+    // The figures still go to stdout, with n = 0 for all to see.
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert_eq!(v["n"], 0);
+}
+
+#[test]
+fn eval_ate_of_a_trajectory_with_repeated_times_against_itself_is_zero() {
+    let dir = scratch();
+    let mut text = String::new();
+    for i in 0..40 {
+        text += &format!("{} {} {} 0 0 0 0 1\n", i / 4, i, i % 3);
+    }
+    let traj = file(dir.path(), "t.tum", &text);
+    let o = qicp(&["eval", "ate", s(&traj), s(&traj), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert_eq!(v["ate_max_m"], 0.0);
+}
