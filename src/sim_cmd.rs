@@ -20,7 +20,9 @@ use crate::logs::{carmen::write_carmen, tum::write_tum};
 /// Arguments of `qicp sim`.
 #[derive(Debug, clap::Args)]
 pub struct SimArgs {
-    /// The drive's TOML configuration, e.g. `configs/worlds/park.toml`.
+    /// The drive's TOML configuration, e.g. `configs/worlds/park.toml`, or an experiment
+    /// configuration with a `sim` source (e.g. `configs/park.toml`): its drive is simulated,
+    /// with the source's seeds and length.
     pub config: PathBuf,
     /// Output directory (created if missing); not with --publish.
     #[arg(long, required_unless_present = "publish", conflicts_with = "publish")]
@@ -38,7 +40,7 @@ pub struct SimArgs {
 
 /// Runs the command.
 pub fn run(a: SimArgs) -> Result<()> {
-    let mut cfg = SimConfig::load(&a.config)?;
+    let mut cfg = load_drive(&a.config)?;
     if let Some(seed) = a.seed {
         cfg.drive.seed = seed;
     }
@@ -124,6 +126,27 @@ pub fn run(a: SimArgs) -> Result<()> {
     })?;
     println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())
+}
+
+/// The drive a configuration describes: a drive configuration, or an experiment's `sim`
+/// source (told apart by the experiment's `[source]` table).
+fn load_drive(path: &Path) -> Result<SimConfig> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let is_experiment = toml::from_str::<toml::Table>(&text)
+        .map(|t| t.contains_key("source"))
+        .unwrap_or(false);
+    if !is_experiment {
+        return Ok(SimConfig::load(path)?);
+    }
+    let experiment = crate::experiment::ExperimentConfig::load(path)?;
+    let Some(sim) = &experiment.source.sim else {
+        anyhow::bail!(
+            "{}: an experiment whose source is a log, not a drive to simulate",
+            path.display()
+        );
+    };
+    experiment.source.drive(sim)
 }
 
 fn write_file(

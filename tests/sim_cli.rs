@@ -113,3 +113,37 @@ fn sim_refuses_a_bad_config_naming_the_key() {
     assert!(err.contains("laser.beams"), "{err}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn sim_takes_an_experiment_config_and_simulates_its_source() {
+    let out = out_dir("experiment");
+    let o = sim(
+        &repo().join("configs/park.toml"),
+        &out,
+        &["--max-scans", "10"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).expect("summary"))
+            .expect("JSON");
+    assert_eq!(summary["scans"], 10);
+    assert_eq!(summary["world"], "park");
+    // The same drive as the drive config itself.
+    let direct = out_dir("experiment-direct");
+    let o = sim(
+        &repo().join("configs/worlds/park.toml"),
+        &direct,
+        &["--max-scans", "10"],
+    );
+    assert!(o.status.success());
+    let direct: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(direct.join("summary.json")).expect("summary"))
+            .expect("JSON");
+    assert_eq!(summary["digest"], direct["digest"]);
+
+    // An experiment on a log has nothing to simulate: said plainly.
+    let o = sim(&repo().join("configs/intel.toml"), &out, &[]);
+    assert!(!o.status.success());
+    let why = String::from_utf8_lossy(&o.stderr);
+    assert!(why.contains("source is a log"), "{why}");
+}
