@@ -44,7 +44,7 @@ use crate::eval::{
 use crate::logs::carmen::{CarmenOptions, read_carmen};
 use crate::logs::relations::{Relation, read_relations};
 use crate::logs::tum::{Stamped, write_tum};
-use crate::matching::{MatchSummary, ScanRow, run_matcher, write_run};
+use crate::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_run};
 use crate::plots::{self, Panel, PathSeries, ScanSeries};
 use anyhow::{Context, Result};
 use qicp_core::{Pose2, Record};
@@ -737,8 +737,7 @@ fn run_once(
         "wall_seconds": started.elapsed().as_secs_f64(),
     });
     let text = serde_json::to_string_pretty(&summary)?;
-    std::fs::write(out.join("summary.json"), format!("{text}\n"))
-        .with_context(|| format!("writing {}", out.join("summary.json").display()))?;
+    write_atomic(&out.join("summary.json"), format!("{text}\n").as_bytes())?;
     Ok(summary)
 }
 
@@ -852,8 +851,7 @@ fn run_worlds(
     });
     let text = serde_json::to_string_pretty(&report)?;
     let path = out.join("worlds.json");
-    std::fs::write(&path, format!("{text}\n"))
-        .with_context(|| format!("writing {}", path.display()))?;
+    write_atomic(&path, format!("{text}\n").as_bytes())?;
     if args.json {
         println!("{text}");
     } else if !args.quiet {

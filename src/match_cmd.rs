@@ -27,6 +27,9 @@ pub struct MatchArgs {
     /// Skip and count malformed log lines instead of failing.
     #[arg(long)]
     pub lenient: bool,
+    /// Readings a laser line may announce at most; longer lines are malformed.
+    #[arg(long, default_value_t = crate::logs::carmen::DEFAULT_MAX_BEAMS)]
+    pub max_beams: usize,
     /// Freiburg relations file: score the trajectory and add the figures to summary.json.
     #[arg(long)]
     pub relations: Option<PathBuf>,
@@ -86,6 +89,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
         .transpose()?;
     let options = CarmenOptions {
         lenient: args.lenient,
+        max_beams: args.max_beams,
         ..CarmenOptions::default()
     };
     let mut reader = CarmenReader::open(log_path, &options)?;

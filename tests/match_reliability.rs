@@ -241,3 +241,38 @@ fn eval_ate_of_a_trajectory_with_repeated_times_against_itself_is_zero() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
     assert_eq!(v["ate_max_m"], 0.0);
 }
+
+#[test]
+fn scans_above_max_beams_are_refused_at_once() {
+    let dir = scratch();
+    let log = file(dir.path(), "wide.clf", &flaser(1.0));
+    let out = dir.path().join("out");
+    let o = qicp(&[
+        "match",
+        s(&log),
+        "--matcher",
+        "wsm",
+        "--out",
+        s(&out),
+        "--max-beams",
+        "100",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("181 readings announced"),
+        "{}",
+        stderr(&o)
+    );
+    let o = qicp(&[
+        "match",
+        s(&log),
+        "--matcher",
+        "wsm",
+        "--out",
+        s(&out),
+        "--max-beams",
+        "0",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("max_beams"), "{}", stderr(&o));
+}
