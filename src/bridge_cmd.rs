@@ -16,8 +16,9 @@ use crate::logs::carmen::load_for_command;
 use crate::matching::{Matching, quantile, write_run};
 use anyhow::{Context, Result, bail};
 use qicp_bridge::{
-    BackPressure, PoseMessage, PosePublisher, PublisherOptions, ScanHeader, ScanPublisher,
-    ScanSubscriber, StreamEnd, StreamEvent, StreamReport, SubscriberOptions, Topics, WaitOptions,
+    BackPressure, ConnectError, PoseMessage, PosePublisher, PublisherOptions, ScanHeader,
+    ScanPublisher, ScanSubscriber, StreamEnd, StreamEvent, StreamReport, SubscriberOptions, Topics,
+    WaitOptions,
 };
 use qicp_core::Record;
 use qicp_matchers::MatcherConfig;
@@ -25,6 +26,30 @@ use serde::Serialize;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+/// The longest wait any timing option accepts (s): one day. A bound catches `inf`, `1e300` and
+/// a typo, and keeps every wait a valid `Duration`.
+pub const MAX_SECONDS: f64 = 86_400.0;
+
+/// Slowest and fastest `--rate` factor (`0.001x` .. `1000000x`).
+pub const RATE_FACTOR_RANGE: (f64, f64) = (1e-3, 1e6);
+
+/// Parses a timing option (seconds): finite, above 0 and at most [`MAX_SECONDS`]. clap names
+/// the option in its error.
+pub fn parse_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if v.is_finite() && v > 0.0 && v <= MAX_SECONDS {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{s} s is out of range: a wait must be finite, above 0 and at most {MAX_SECONDS} s \
+             (a day)"
+        ))
+    }
+}
 
 /// How fast a recorded or simulated drive is published.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -43,14 +68,20 @@ impl std::str::FromStr for Rate {
         match s {
             "realtime" => Ok(Rate::Realtime),
             "max" => Ok(Rate::Max),
-            other => other
-                .strip_suffix('x')
-                .and_then(|f| f.parse::<f64>().ok())
-                .filter(|f| f.is_finite() && *f > 0.0)
-                .map(Rate::Factor)
-                .ok_or_else(|| {
-                    format!("bad rate {other:?}: use realtime, max or a factor like 10x")
-                }),
+            other => {
+                let (slowest, fastest) = RATE_FACTOR_RANGE;
+                other
+                    .strip_suffix('x')
+                    .and_then(|f| f.parse::<f64>().ok())
+                    .filter(|f| (slowest..=fastest).contains(f))
+                    .map(Rate::Factor)
+                    .ok_or_else(|| {
+                        format!(
+                            "bad rate {other:?}: use realtime, max or a factor from {slowest}x \
+                             to {fastest}x, like 10x"
+                        )
+                    })
+            }
         }
     }
 }
@@ -85,15 +116,29 @@ pub struct PublishArgs {
     /// drop-oldest mode).
     #[arg(long)]
     pub wait_subscribers: Option<usize>,
-    /// Seconds to wait for them.
-    #[arg(long, default_value_t = 60.0)]
+    /// Seconds to wait for them (above 0, at most a day, like every timing option).
+    #[arg(long, default_value_t = 60.0, value_parser = parse_seconds)]
     pub connect_timeout: f64,
     /// Seconds to wait after the end-of-stream marker for the subscribers to leave.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = parse_seconds)]
     pub linger: f64,
     /// Seconds one send may wait for a full subscriber in block mode before failing.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = parse_seconds)]
     pub block_timeout: f64,
+    /// iceoryx2 configuration file (TOML) of this process's node. Default: iceoryx2's built-in
+    /// settings; qicp never reads `config/iceoryx2.toml` from the working directory (nor the
+    /// user's or the system's iceoryx2.toml). All processes of one bridge need the same.
+    #[arg(long, value_name = "FILE")]
+    pub iceoryx2_config: Option<PathBuf>,
+}
+
+/// The topics of `prefix` in the iceoryx2 configuration of `file` (built-in defaults if none).
+fn topics(prefix: &str, file: Option<&Path>) -> Result<Topics> {
+    let topics = Topics::new(prefix);
+    Ok(match file {
+        Some(file) => topics.with_config_file(file)?,
+        None => topics,
+    })
 }
 
 /// What a publisher reports at its end (printed as JSON on stdout).
@@ -115,8 +160,11 @@ pub struct PublishReport {
     pub wall_seconds: f64,
 }
 
+/// A wait of `s` seconds; the options are bounded by [`parse_seconds`], and anything else
+/// (negative, NaN, beyond [`MAX_SECONDS`]) is clamped rather than trusted.
 fn secs(s: f64) -> Duration {
-    Duration::from_secs_f64(s.max(0.0))
+    let s = if s.is_nan() { 0.0 } else { s };
+    Duration::from_secs_f64(s.clamp(0.0, MAX_SECONDS))
 }
 
 /// Records a source may produce ahead of the publisher while it starts (about 1.5 MB of
@@ -210,7 +258,7 @@ pub fn publish_records(
 
 /// Creates the scan publisher and waits for the subscribers it needs.
 fn connect(beams: usize, args: &PublishArgs) -> Result<ScanPublisher> {
-    let topics = Topics::new(&args.service_prefix);
+    let topics = topics(&args.service_prefix, args.iceoryx2_config.as_deref())?;
     let publisher = ScanPublisher::create(
         &topics,
         &PublisherOptions {
@@ -219,7 +267,13 @@ fn connect(beams: usize, args: &PublishArgs) -> Result<ScanPublisher> {
             fixed_size: true,
             block_timeout: secs(args.block_timeout),
         },
-    )?;
+    )
+    .map_err(|e| match e {
+        ConnectError::Owned { .. } => anyhow::anyhow!(
+            "{e}; its subscribers would see two streams mixed, so this one does not start"
+        ),
+        e => e.into(),
+    })?;
     let want = args.wait_subscribers.unwrap_or(match args.backpressure {
         BackPressure::Block => 1,
         BackPressure::DropOldest => 0,
@@ -258,6 +312,33 @@ impl Drive {
         }
     }
 
+    /// How long to wait before `record` is due at `speed`; refused (naming the scan) if that is
+    /// not a finite wait of at most [`MAX_SECONDS`], e.g. a log whose time jumps by 1e20 s.
+    fn wait_for(
+        &self,
+        record: &Record,
+        speed: f64,
+        elapsed: Duration,
+        index: u64,
+    ) -> Result<Duration> {
+        let t = record.timestamp();
+        let due = (t - self.first_timestamp) / speed;
+        let wait = due - elapsed.as_secs_f64();
+        if !due.is_finite() || wait > MAX_SECONDS {
+            bail!(
+                "scan {index} (t = {t} s) is due {due} s after the first (t = {} s) at --rate {}: \
+                 a wait beyond {MAX_SECONDS} s; the log's time jumps (publish it with --rate max)",
+                self.first_timestamp,
+                match self.rate {
+                    Rate::Realtime => "realtime".to_string(),
+                    Rate::Max => "max".to_string(),
+                    Rate::Factor(f) => format!("{f}x"),
+                }
+            );
+        }
+        Ok(secs(wait))
+    }
+
     /// Publishes `record` when it is due; false once SIGINT/SIGTERM arrived (not published).
     fn publish(&mut self, publisher: &mut ScanPublisher, record: Record) -> Result<bool> {
         let started = *self.started.get_or_insert_with(|| {
@@ -265,8 +346,8 @@ impl Drive {
             Instant::now()
         });
         if let Some(speed) = self.rate.speed() {
-            let due = secs((record.timestamp() - self.first_timestamp) / speed);
-            if let Some(wait) = due.checked_sub(started.elapsed()) {
+            let wait = self.wait_for(&record, speed, started.elapsed(), publisher.sent())?;
+            if !wait.is_zero() {
                 std::thread::sleep(wait);
             }
         }
@@ -334,15 +415,21 @@ pub struct SubscribeArgs {
     /// Require this back-pressure mode (default: adopt the publisher's; block if first).
     #[arg(long)]
     pub backpressure: Option<BackPressure>,
-    /// Seconds to wait for a publisher to appear.
-    #[arg(long, default_value_t = 60.0)]
+    /// Seconds to wait for a publisher to appear (above 0, at most a day, like every timing
+    /// option).
+    #[arg(long, default_value_t = 60.0, value_parser = parse_seconds)]
     pub connect_timeout: f64,
     /// Seconds to wait for a new publisher after one was lost.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = parse_seconds)]
     pub reconnect_timeout: f64,
     /// Seconds without a scan, a publisher being connected, before giving up.
-    #[arg(long, default_value_t = 120.0)]
+    #[arg(long, default_value_t = 120.0, value_parser = parse_seconds)]
     pub idle_timeout: f64,
+    /// iceoryx2 configuration file (TOML) of this process's node. Default: iceoryx2's built-in
+    /// settings; qicp never reads `config/iceoryx2.toml` from the working directory (nor the
+    /// user's or the system's iceoryx2.toml). All processes of one bridge need the same.
+    #[arg(long, value_name = "FILE")]
+    pub iceoryx2_config: Option<PathBuf>,
     /// Sleep this long after each scan (tests: a slow subscriber).
     #[arg(long, default_value_t = 0, hide = true)]
     pub delay_ms: u64,
@@ -372,6 +459,9 @@ pub struct SubscribeSummary {
     pub publishers_seen: u64,
     /// Publishers that vanished without an end-of-stream marker.
     pub publishers_lost: u64,
+    /// Messages of a second publisher, sent while the first was connected: ignored, never
+    /// mixed in (any makes the run fail).
+    pub intruders: u64,
     /// Scans the last publisher announced in its end marker.
     pub announced: Option<u64>,
     /// Scans whose message could not be turned into a scan (bad geometry, NaN time).
@@ -399,6 +489,7 @@ impl SubscribeSummary {
             out_of_order: report.out_of_order,
             publishers_seen: report.publishers_seen,
             publishers_lost: report.publishers_lost,
+            intruders: report.intruders,
             announced: report.announced,
             rejected,
             poses_published: poses,
@@ -409,15 +500,26 @@ impl SubscribeSummary {
 /// Runs `qicp match --subscribe`: matches every scan received, publishes its pose, and at the
 /// end writes what `qicp match` writes (when `out` is given) plus the stream's figures.
 ///
-/// Returns an error (after writing the outputs) when the stream did not end with its marker:
-/// publisher lost, none appeared, or it went idle.
+/// Returns an error (after writing the outputs) when the stream did not end with its marker
+/// (publisher lost, none appeared, or it went idle) or another publisher intruded. Refuses to
+/// start when another process already publishes poses on `<prefix>/pose` (a second matcher):
+/// the pose service, like every service, has one owner.
 pub fn run_subscribe(
     config: &MatcherConfig,
     out: Option<&Path>,
     json: bool,
     args: &SubscribeArgs,
 ) -> Result<()> {
-    let topics = Topics::new(&args.prefix);
+    let topics = topics(&args.prefix, args.iceoryx2_config.as_deref())?;
+    // The pose publisher first: a second matcher on the same prefix is refused before it
+    // subscribes to the scans (where it would hold a block-mode publisher back).
+    let mut poses = PosePublisher::create(&topics).map_err(|e| match e {
+        ConnectError::Owned { .. } => anyhow::anyhow!(
+            "{e}; is another `qicp match --subscribe` running with --service-prefix {}?",
+            args.prefix
+        ),
+        e => e.into(),
+    })?;
     let scans = ScanSubscriber::create(
         &topics,
         &SubscriberOptions {
@@ -433,7 +535,6 @@ pub fn run_subscribe(
         },
     )?;
     let backpressure = scans.backpressure();
-    let mut poses = PosePublisher::create(&topics)?;
     let mut matching = Matching::new(config)?;
     let mut rejected = 0u64;
     let mut publish_error = None;
@@ -448,14 +549,17 @@ pub fn run_subscribe(
             StreamEvent::Data(view) => match view.header.to_record(view.ranges) {
                 Ok(record) => {
                     let estimate = matching.push(&record);
-                    let message = PoseMessage::of(
-                        0,
-                        view.header.seq,
-                        record.timestamp(),
-                        estimate.pose,
-                        &estimate.result,
-                        estimate.inserted,
-                    );
+                    let message = PoseMessage {
+                        scan_publisher: view.header.publisher,
+                        ..PoseMessage::of(
+                            0,
+                            view.header.seq,
+                            record.timestamp(),
+                            estimate.pose,
+                            &estimate.result,
+                            estimate.inserted,
+                        )
+                    };
                     if let Err(e) = poses.publish(message) {
                         publish_error = Some(e);
                         return ControlFlow::Break(());
@@ -475,6 +579,11 @@ pub fn run_subscribe(
                 args.reconnect_timeout
             ),
             StreamEvent::Gap { missing } => eprintln!("gap: {missing} scans lost"),
+            StreamEvent::Intruder => eprintln!(
+                "error: a second publisher sends on {} while the first is connected; its scans \
+                 are ignored and the run will fail",
+                topics.scan()
+            ),
         }
         if args.delay_ms > 0 {
             std::thread::sleep(Duration::from_millis(args.delay_ms));
@@ -504,6 +613,15 @@ pub fn run_subscribe(
     }
     // Give pose subscribers a moment to read the tail before this process's memory goes.
     poses.linger(Duration::from_secs(5))?;
+    if report.intruders > 0 {
+        bail!(
+            "{} messages of a second publisher on {} were ignored (a service has one owner); \
+             outputs cover the {} scans of the first",
+            report.intruders,
+            topics.scan(),
+            report.received
+        );
+    }
     match report.end {
         Some(StreamEnd::EndOfStream | StreamEnd::Interrupted | StreamEnd::Stopped) => Ok(()),
         Some(end) => bail!(

@@ -149,6 +149,10 @@ fn python_subscriber_reads_scans_and_poses() {
         .collect();
     let pose = &s["last_pose"];
     assert_eq!(pose["scan_seq"], 29);
+    // Every message names its publisher: the pose names the scan's.
+    assert!(s["scan_publisher"].as_u64().is_some_and(|p| p > 0), "{s}");
+    assert_eq!(pose["scan_publisher"], s["scan_publisher"], "{s}");
+    assert!(pose["publisher"].as_u64().is_some_and(|p| p > 0), "{s}");
     let close = |a: f64, b: &serde_json::Value| (a - b.as_f64().expect("number")).abs() < 1e-9;
     assert!(
         close(last[1], &pose["x"]) && close(last[2], &pose["y"]),

@@ -23,7 +23,7 @@ import time
 
 import iceoryx2 as iox2
 
-LAYOUT_VERSION = 2
+LAYOUT_VERSION = 3
 KIND_DATA = 0
 KIND_END_OF_STREAM = 1
 FLAG_HAS_TRUTH = 1
@@ -35,7 +35,7 @@ SCAN_BUFFER_MAX = 256
 POSE_HISTORY_MAX = 64
 POSE_BUFFER_MAX = 256
 MAX_SUBSCRIBERS = 8
-MAX_PUBLISHERS = 4
+MAX_PUBLISHERS = 1  # one owner per service: qicp refuses a service that allows more
 
 # Event ids (qicp_bridge::event_id).
 SAMPLE = 1
@@ -57,7 +57,7 @@ class PoseC(ctypes.Structure):
 
 
 class ScanHeader(ctypes.Structure):
-    """User header of a `<prefix>/scan` sample (136 bytes); the payload is `beams` doubles."""
+    """User header of a `<prefix>/scan` sample (144 bytes); the payload is `beams` doubles."""
 
     _fields_ = [
         ("layout_version", ctypes.c_uint32),
@@ -73,6 +73,7 @@ class ScanHeader(ctypes.Structure):
         ("min_range", ctypes.c_double),
         ("beams", ctypes.c_uint32),
         ("flags", ctypes.c_uint32),
+        ("publisher", ctypes.c_uint64),
     ]
 
     @staticmethod
@@ -81,7 +82,7 @@ class ScanHeader(ctypes.Structure):
 
 
 class PoseMessage(ctypes.Structure):
-    """Payload of `<prefix>/pose` (160 bytes)."""
+    """Payload of `<prefix>/pose` (176 bytes)."""
 
     _fields_ = [
         ("layout_version", ctypes.c_uint32),
@@ -97,6 +98,8 @@ class PoseMessage(ctypes.Structure):
         ("inserted", ctypes.c_uint32),
         ("iterations", ctypes.c_uint32),
         ("correspondences", ctypes.c_uint32),
+        ("publisher", ctypes.c_uint64),
+        ("scan_publisher", ctypes.c_uint64),
     ]
 
     @staticmethod
@@ -104,7 +107,7 @@ class PoseMessage(ctypes.Structure):
         return "qicp::PoseMessage"
 
 
-assert ctypes.sizeof(ScanHeader) == 136 and ctypes.sizeof(PoseMessage) == 160
+assert ctypes.sizeof(ScanHeader) == 144 and ctypes.sizeof(PoseMessage) == 176
 
 
 class Stream:
@@ -174,7 +177,9 @@ def main():
         timeout = float(sys.argv[sys.argv.index("--timeout") + 1])
 
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
-    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    # iceoryx2's built-in settings, as qicp uses by default: without .config() iceoryx2 would
+    # read config/iceoryx2.toml from the working directory, and might not meet qicp.
+    node = iox2.NodeBuilder.new().config(iox2.config.default()).create(iox2.ServiceType.Ipc)
     scans = Stream(node, f"{prefix}/scan", iox2.Slice[ctypes.c_double], ScanHeader,
                    safe_overflow=False, history_max=SCAN_HISTORY_MAX, buffer_max=SCAN_BUFFER_MAX)
     poses = Stream(node, f"{prefix}/pose", PoseMessage, None, safe_overflow=True,
@@ -185,7 +190,7 @@ def main():
     print(f"waiting on {scans.name} and {poses.name}", file=sys.stderr, flush=True)
 
     summary = {"scans": 0, "beams": None, "range_sum": 0.0, "truth_poses": 0, "poses": 0,
-               "last_pose": None, "matched": 0}
+               "last_pose": None, "matched": 0, "scan_publisher": None}
     last_activity = time.monotonic()
     while not (scans.ended and poses.ended):
         for stream in (scans, poses):
@@ -198,6 +203,8 @@ def main():
                 scans.ended = True
                 summary["scans_announced"] = header.seq
                 break
+            # The publisher's identity is in the header too (header.publisher); iceoryx2's
+            # publisher_id is the same port's full id.
             scans.check(str(sample.header.publisher_id), header.seq)
             ranges = sample.payload()  # an iox2.Slice: a view into shared memory, no copy
             # The Python binding 0.10 reports Slice.len() of a received [f64] in bytes, not
@@ -208,6 +215,7 @@ def main():
             values = (ctypes.c_double * beams).from_address(ranges.as_ptr())
             summary["scans"] += 1
             summary["beams"] = beams
+            summary["scan_publisher"] = header.publisher
             summary["range_sum"] += sum(values)
             summary["truth_poses"] += 1 if header.flags & FLAG_HAS_TRUTH else 0
             last_activity = time.monotonic()
@@ -221,7 +229,9 @@ def main():
             poses.check(str(sample.header.publisher_id), pose.seq)
             summary["poses"] += 1
             summary["matched"] += 1 if pose.fallback == 0 else 0
-            summary["last_pose"] = {"scan_seq": pose.scan_seq, "timestamp": pose.timestamp,
+            summary["last_pose"] = {"scan_seq": pose.scan_seq,
+                                    "scan_publisher": pose.scan_publisher,
+                                    "publisher": pose.publisher, "timestamp": pose.timestamp,
                                     "x": pose.pose.x, "y": pose.pose.y, "theta": pose.pose.theta,
                                     "covariance": list(pose.covariance)}
             last_activity = time.monotonic()

@@ -53,6 +53,36 @@ pub enum ConnectError {
         /// iceoryx2's error.
         detail: String,
     },
+    /// Another publisher owns the service: a qicp service has one publisher, so that no
+    /// subscriber ever mixes two streams.
+    #[error(
+        "another process already publishes on {service:?} (a qicp service has one publisher: \
+         stop the other one, or use another service prefix)"
+    )]
+    Owned {
+        /// The service.
+        service: String,
+    },
+    /// The service exists but allows more than one publisher (created by another program or an
+    /// older qicp), so its stream could be mixed.
+    #[error(
+        "service {service:?} was created for {max_publishers} publishers; qicp needs one owner \
+         per service (stop the program that created it, or use another service prefix)"
+    )]
+    NotSingleOwner {
+        /// The service.
+        service: String,
+        /// The publishers it allows.
+        max_publishers: usize,
+    },
+    /// The iceoryx2 configuration file could not be read or parsed.
+    #[error("iceoryx2 configuration {path:?}: {detail}")]
+    Config {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong with it.
+        detail: String,
+    },
     /// A request outside the service's fixed limits.
     #[error("{what} {requested} exceeds the service limit {limit}")]
     Limit {
@@ -92,6 +122,18 @@ pub enum PublishError {
         service: String,
         /// iceoryx2's error.
         detail: String,
+    },
+    /// In `block` mode every subscriber left while the publisher still had data: what it
+    /// would send now would reach nobody, which `block` (lossless) promises never to do.
+    #[error(
+        "every subscriber of {service:?} left after {sent} messages; in block (lossless) mode \
+         the rest would reach nobody"
+    )]
+    SubscribersLeft {
+        /// The service.
+        service: String,
+        /// Messages sent before.
+        sent: u64,
     },
     /// The scan has more beams than a sample header can count.
     #[error("a scan of {beams} beams is too long for the wire format")]

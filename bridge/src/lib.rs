@@ -9,7 +9,11 @@
 //!   [`PoseMessage`], the end-of-stream marker) and their conversions to [`qicp_core`] types;
 //! - [`ScanPublisher`], [`ScanSubscriber`], [`PosePublisher`], [`PoseSubscriber`]: typed ports
 //!   on the services `<prefix>/scan` and `<prefix>/pose` (see [`Topics`]);
-//! - [`sequence`]: the sequence-number bookkeeping that makes every loss visible.
+//! - [`sequence`]: the sequence-number bookkeeping that makes every loss visible;
+//! - one owner per service: a second publisher on a stream is refused
+//!   ([`ConnectError::Owned`]), and every message names its publisher;
+//! - the iceoryx2 configuration is explicit ([`Topics::with_config_file`]; default iceoryx2's
+//!   built-in one), never a file found in the working directory.
 //!
 //! Zero copy: a publisher loans a sample in shared memory and writes the ranges into it;
 //! the subscriber reads the same memory ([`ScanView::ranges`]). The one copy on the receiving
@@ -22,8 +26,8 @@ pub mod sequence;
 mod transport;
 
 pub use error::{ConnectError, PublishError, ReceiveError};
-pub use messages::{LAYOUT_VERSION, PoseC, PoseMessage, ScanHeader};
-pub use sequence::{SequenceTracker, StreamEnd, StreamReport};
+pub use messages::{LAYOUT_VERSION, PoseC, PoseMessage, ScanHeader, publisher_identity};
+pub use sequence::{Admission, SequenceTracker, StreamEnd, StreamReport};
 pub use transport::{
     BackPressure, DEFAULT_PREFIX, MAX_PUBLISHERS, MAX_SUBSCRIBERS, POSE_BUFFER_MAX,
     POSE_HISTORY_MAX, PosePublisher, PoseSubscriber, PublisherOptions, SCAN_BUFFER_MAX,

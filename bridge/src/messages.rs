@@ -10,8 +10,10 @@ use qicp_core::{BeamGeometry, Fallback, MatchResult, Pose2, Record, Scan, ScanEr
 
 /// Version of the layout below; bumped on any change of a field's place, type or meaning,
 /// checked by every subscriber. 2: `certainty` is sqrt(σxx² + σyy²) in m² (was sqrt(σxx + σyy)
-/// in m).
-pub const LAYOUT_VERSION: u32 = 2;
+/// in m). 3: every message names its publisher (`ScanHeader::publisher`,
+/// `PoseMessage::publisher` and `scan_publisher`), so a sequence number is always read as
+/// (publisher, seq).
+pub const LAYOUT_VERSION: u32 = 3;
 
 /// `kind` of a message carrying data (a scan or a pose).
 pub const KIND_DATA: u32 = 0;
@@ -56,7 +58,16 @@ impl From<PoseC> for Pose2 {
     }
 }
 
-/// The user header of a scan sample (136 bytes); the sample's payload is the slice of `beams`
+/// The identity a publisher writes into its messages: iceoryx2's unique id of the publisher port
+/// (the `publisher_id` of every sample's header), folded to 64 bits; never 0, so that 0 can
+/// stand for "no publisher". A restarted publisher has a new identity.
+#[must_use]
+pub fn publisher_identity(unique_id: u128) -> u64 {
+    let folded = (unique_id as u64) ^ ((unique_id >> 64) as u64);
+    folded.max(1)
+}
+
+/// The user header of a scan sample (144 bytes); the sample's payload is the slice of `beams`
 /// ranges (`f64`, metres, raw as measured) that follows it in shared memory.
 ///
 /// Service `<prefix>/scan`: payload `[f64]`, user header `ScanHeader`
@@ -69,7 +80,7 @@ pub struct ScanHeader {
     pub layout_version: u32,
     /// [`KIND_DATA`] or [`KIND_END_OF_STREAM`].
     pub kind: u32,
-    /// 0, 1, 2, … per publisher; a restarted publisher starts again at 0.
+    /// 0, 1, 2, … per publisher (see `publisher`); a restarted publisher starts again at 0.
     pub seq: u64,
     /// Time of the sweep (s).
     pub timestamp: f64,
@@ -91,6 +102,8 @@ pub struct ScanHeader {
     pub beams: u32,
     /// [`FLAG_HAS_TRUTH`].
     pub flags: u32,
+    /// The publisher's identity ([`publisher_identity`]): `seq` counts within it.
+    pub publisher: u64,
 }
 
 impl ScanHeader {
@@ -116,6 +129,7 @@ impl ScanHeader {
             } else {
                 0
             },
+            publisher: 0,
         }
     }
 
@@ -172,7 +186,7 @@ pub mod fallback_code {
     pub const REFUSED: u32 = 5;
 }
 
-/// One pose estimate of the matcher (160 bytes), the payload of `<prefix>/pose`
+/// One pose estimate of the matcher (176 bytes), the payload of `<prefix>/pose`
 /// (iceoryx2 type name `"qicp::PoseMessage"`, no user header).
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
@@ -182,9 +196,9 @@ pub struct PoseMessage {
     pub layout_version: u32,
     /// [`KIND_DATA`] or [`KIND_END_OF_STREAM`].
     pub kind: u32,
-    /// 0, 1, 2, … per pose publisher.
+    /// 0, 1, 2, … per pose publisher (see `publisher`).
     pub seq: u64,
-    /// `seq` of the scan this pose estimates (in its publisher's numbering).
+    /// `seq` of the scan this pose estimates, in the numbering of `scan_publisher`.
     pub scan_seq: u64,
     /// Time of the scan (s).
     pub timestamp: f64,
@@ -204,6 +218,11 @@ pub struct PoseMessage {
     pub iterations: u32,
     /// Correspondences in the final iteration.
     pub correspondences: u32,
+    /// The pose publisher's identity ([`publisher_identity`]): `seq` counts within it.
+    pub publisher: u64,
+    /// The identity of the scan's publisher ([`ScanHeader::publisher`]): `scan_seq` counts
+    /// within it.
+    pub scan_publisher: u64,
 }
 
 impl PoseMessage {
@@ -251,6 +270,8 @@ impl PoseMessage {
             inserted: u32::from(inserted),
             iterations: result.iterations,
             correspondences: u32::try_from(result.correspondences).unwrap_or(u32::MAX),
+            publisher: 0,
+            scan_publisher: 0,
         }
     }
 
@@ -275,7 +296,7 @@ mod tests {
     #[test]
     fn layouts_match_the_documentation() {
         assert_eq!(size_of::<PoseC>(), 24);
-        assert_eq!(size_of::<ScanHeader>(), 136);
+        assert_eq!(size_of::<ScanHeader>(), 144);
         assert_eq!(align_of::<ScanHeader>(), 8);
         assert_eq!(offset_of!(ScanHeader, seq), 8);
         assert_eq!(offset_of!(ScanHeader, timestamp), 16);
@@ -286,8 +307,9 @@ mod tests {
         assert_eq!(offset_of!(ScanHeader, min_range), 120);
         assert_eq!(offset_of!(ScanHeader, beams), 128);
         assert_eq!(offset_of!(ScanHeader, flags), 132);
+        assert_eq!(offset_of!(ScanHeader, publisher), 136);
 
-        assert_eq!(size_of::<PoseMessage>(), 160);
+        assert_eq!(size_of::<PoseMessage>(), 176);
         assert_eq!(align_of::<PoseMessage>(), 8);
         assert_eq!(offset_of!(PoseMessage, scan_seq), 16);
         assert_eq!(offset_of!(PoseMessage, timestamp), 24);
@@ -297,6 +319,15 @@ mod tests {
         assert_eq!(offset_of!(PoseMessage, certainty), 136);
         assert_eq!(offset_of!(PoseMessage, fallback), 144);
         assert_eq!(offset_of!(PoseMessage, correspondences), 156);
+        assert_eq!(offset_of!(PoseMessage, publisher), 160);
+        assert_eq!(offset_of!(PoseMessage, scan_publisher), 168);
+    }
+
+    #[test]
+    fn publisher_identity_is_never_zero_and_keeps_both_halves() {
+        assert_eq!(publisher_identity(0), 1);
+        assert_ne!(publisher_identity(5), publisher_identity(6));
+        assert_ne!(publisher_identity(1 << 64), publisher_identity(2 << 64));
     }
 
     #[test]

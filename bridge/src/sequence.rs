@@ -10,6 +10,11 @@
 //!   also reveals a lost tail;
 //! - **publisher lost**: a publisher that vanished (killed, crashed, or left without the
 //!   end-of-stream marker); what it sent after the last received message is unknown.
+//!
+//! A stream has one owner: the publisher whose messages it follows. A message of any other
+//! publisher while the owner is still connected (possible only on a service that allows more
+//! than one publisher, which qicp refuses to create or join) is an **intruder**: counted,
+//! never delivered, and its end-of-stream marker never ends the stream.
 
 /// How a stream ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -60,6 +65,9 @@ pub struct StreamReport {
     pub publishers_seen: u64,
     /// Publishers that vanished without an end-of-stream marker.
     pub publishers_lost: u64,
+    /// Messages (data or end markers) of another publisher while the owner was connected:
+    /// ignored, never mixed into the stream.
+    pub intruders: u64,
     /// The number of messages the publisher announced in its end-of-stream marker.
     pub announced: Option<u64>,
     /// How the stream ended (`None` while it runs).
@@ -67,13 +75,15 @@ pub struct StreamReport {
 }
 
 impl StreamReport {
-    /// True if the stream ended normally and every message sent was received.
+    /// True if the stream ended normally, every message sent was received and no other
+    /// publisher intruded.
     #[must_use]
     pub fn is_complete(&self) -> bool {
         self.end == Some(StreamEnd::EndOfStream)
             && self.missing == 0
             && self.missed_before_join == 0
             && self.publishers_lost == 0
+            && self.intruders == 0
     }
 }
 
@@ -96,6 +106,21 @@ pub enum Observation {
     OutOfOrder,
 }
 
+/// Whether a message belongs to the stream ([`SequenceTracker::admit`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Admission {
+    /// From the owner, or no stream is open: observe it.
+    Admitted,
+    /// The owner vanished without its end marker (now counted lost); this publisher follows
+    /// it: observe it.
+    Succeeds,
+    /// Another publisher while the owner is connected: drop it (counted in `intruders`).
+    Intruder {
+        /// This publisher's first intrusion (report it once).
+        first: bool,
+    },
+}
+
 /// Tracks the sequence numbers of one subscriber's stream (across publisher restarts).
 #[derive(Debug, Default)]
 pub struct SequenceTracker {
@@ -103,6 +128,8 @@ pub struct SequenceTracker {
     current: Option<(u128, u64)>,
     /// Whether the current publisher's stream has ended (marker or loss already counted).
     current_closed: bool,
+    /// Publishers whose messages were refused as intruders (each reported once).
+    intruder_ids: Vec<u128>,
     report: StreamReport,
 }
 
@@ -177,6 +204,39 @@ impl SequenceTracker {
         if self.current.is_some() && !self.current_closed {
             self.report.publishers_lost += 1;
             self.current_closed = true;
+        }
+    }
+
+    /// The owner: the publisher of the open stream (seen, neither ended nor counted lost).
+    #[must_use]
+    pub fn owner(&self) -> Option<u128> {
+        match self.current {
+            Some((id, _)) if !self.current_closed => Some(id),
+            _ => None,
+        }
+    }
+
+    /// Decides whether a message (data or end marker) of `origin` belongs to the stream,
+    /// before [`SequenceTracker::observe`] or [`SequenceTracker::end_of_stream`] is called
+    /// for it. A message of another publisher than the owner is the owner's successor if the
+    /// owner is gone (`owner_connected(owner)` false: the owner is counted lost) and an
+    /// intruder otherwise (counted in `intruders`, to be dropped).
+    pub fn admit(&mut self, origin: u128, owner_connected: impl FnOnce(u128) -> bool) -> Admission {
+        match self.owner() {
+            Some(owner) if owner != origin => {
+                if owner_connected(owner) {
+                    self.report.intruders += 1;
+                    let first = !self.intruder_ids.contains(&origin);
+                    if first {
+                        self.intruder_ids.push(origin);
+                    }
+                    Admission::Intruder { first }
+                } else {
+                    self.publisher_lost();
+                    Admission::Succeeds
+                }
+            }
+            _ => Admission::Admitted,
         }
     }
 
@@ -269,6 +329,79 @@ mod tests {
         let r = t.finish(StreamEnd::Stopped);
         assert_eq!(r.publishers_lost, 2);
         assert_eq!(r.out_of_order, 0);
+    }
+
+    /// The trial of issue 14: a second publisher's scans were mixed into the stream and its
+    /// end marker ended it, while the first publisher was still connected.
+    #[test]
+    fn intruder_is_counted_never_mixed_and_its_end_marker_ends_nothing() {
+        let mut t = SequenceTracker::new();
+        let mut delivered = Vec::new();
+        let mut ended = false;
+        let messages = [
+            (1, 0, false),
+            (2, 0, false),
+            (1, 1, false),
+            (2, 1, false),
+            (2, 2, true),
+            (1, 2, false),
+            (1, 3, true),
+        ];
+        for (origin, seq, end) in messages {
+            match t.admit(origin, |_| true) {
+                Admission::Intruder { .. } => continue,
+                Admission::Succeeds => panic!("the owner is connected"),
+                Admission::Admitted => {}
+            }
+            if end {
+                t.end_of_stream(origin, seq);
+                ended = true;
+                break;
+            }
+            t.observe(origin, seq);
+            delivered.push((origin, seq));
+        }
+        assert!(ended);
+        assert_eq!(delivered, [(1, 0), (1, 1), (1, 2)]);
+        let r = t.finish(StreamEnd::EndOfStream);
+        assert_eq!(r.intruders, 3);
+        assert_eq!(r.publishers_seen, 1);
+        assert_eq!(
+            (r.missing, r.missed_before_join, r.announced),
+            (0, 0, Some(3))
+        );
+        assert!(
+            !r.is_complete(),
+            "an intruded stream is not complete: {r:?}"
+        );
+    }
+
+    #[test]
+    fn intruder_is_reported_once_per_publisher() {
+        let mut t = SequenceTracker::new();
+        assert_eq!(t.admit(1, |_| true), Admission::Admitted);
+        t.observe(1, 0);
+        assert_eq!(t.admit(2, |_| true), Admission::Intruder { first: true });
+        assert_eq!(t.admit(2, |_| true), Admission::Intruder { first: false });
+        assert_eq!(t.admit(3, |_| true), Admission::Intruder { first: true });
+        assert_eq!(t.report().intruders, 3);
+        assert_eq!(t.owner(), Some(1));
+    }
+
+    #[test]
+    fn successor_of_a_vanished_owner_is_admitted_and_the_owner_counted_lost() {
+        let mut t = SequenceTracker::new();
+        t.observe(1, 0);
+        t.observe(1, 1);
+        assert_eq!(t.admit(2, |owner| owner != 1), Admission::Succeeds);
+        assert_eq!(t.observe(2, 0), Observation::NewPublisher { skipped: 0 });
+        t.end_of_stream(2, 1);
+        let r = t.finish(StreamEnd::EndOfStream);
+        assert_eq!(
+            (r.publishers_seen, r.publishers_lost, r.intruders),
+            (2, 1, 0)
+        );
+        assert_eq!(r.received, 3);
     }
 
     #[test]

@@ -4,13 +4,24 @@
 //! the messages and an event service that wakes the other side (a sample was sent, a subscriber
 //! connected or left). Subscribers block in a [`WaitSet`] on their event listener; between
 //! events they wake only on a `tick` to notice a publisher that died without saying so.
+//!
+//! One owner per service: every service qicp creates allows one publisher, and qicp joins no
+//! service that allows more, so a subscriber never sees two streams mixed. A publisher whose
+//! service is taken is refused ([`ConnectError::Owned`]).
+//!
+//! The iceoryx2 configuration is explicit ([`Topics::with_config_file`], default: iceoryx2's
+//! built-in defaults): iceoryx2's own lookup of `config/iceoryx2.toml` in the working
+//! directory (then the user's and the system's) is never used.
 
 use crate::error::{ConnectError, PublishError, ReceiveError, detail, port_error};
-use crate::messages::{KIND_END_OF_STREAM, LAYOUT_VERSION, PoseMessage, ScanHeader};
-use crate::sequence::{Observation, SequenceTracker, StreamEnd, StreamReport};
+use crate::messages::{
+    KIND_END_OF_STREAM, LAYOUT_VERSION, PoseMessage, ScanHeader, publisher_identity,
+};
+use crate::sequence::{Admission, Observation, SequenceTracker, StreamEnd, StreamReport};
+use iceoryx2::config::Config;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
@@ -19,6 +30,7 @@ use iceoryx2::sample::Sample;
 use iceoryx2::service::builder::publish_subscribe::{
     PublishSubscribeCreateError, PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
 };
+use iceoryx2::service::dynamic_config::publish_subscribe::PublisherDetails;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe};
 use iceoryx2::waitset::WaitSetRunResult;
 use qicp_core::Record;
@@ -40,8 +52,10 @@ pub const POSE_HISTORY_MAX: usize = 64;
 pub const POSE_BUFFER_MAX: usize = 256;
 /// Subscribers per stream.
 pub const MAX_SUBSCRIBERS: usize = 8;
-/// Publishers per stream (one live; room for a dead one not yet cleaned up).
-pub const MAX_PUBLISHERS: usize = 4;
+/// Publishers per stream: one owner. A second publisher's creation fails
+/// ([`ConnectError::Owned`]); a killed owner's slot is freed by removing its dead node, which
+/// a new publisher does before giving up.
+pub const MAX_PUBLISHERS: usize = 1;
 
 /// How often a waiting publisher removes dead nodes (a killed subscriber stops counting).
 const CLEANUP_EVERY: Duration = Duration::from_millis(100);
@@ -65,10 +79,15 @@ pub mod event_id {
     pub const SUBSCRIBER_READY: usize = 6;
 }
 
-/// The service names of one qicp bridge (`<prefix>/scan`, `<prefix>/pose`).
+/// The service names of one qicp bridge (`<prefix>/scan`, `<prefix>/pose`) and the iceoryx2
+/// configuration they live in.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Topics {
     prefix: String,
+    /// iceoryx2's settings (where its files live, their prefix, …): the built-in defaults
+    /// unless a file was given. Processes meet only if they agree on them.
+    config: std::sync::Arc<Config>,
+    config_file: Option<std::path::PathBuf>,
 }
 
 impl Default for Topics {
@@ -80,10 +99,37 @@ impl Default for Topics {
 impl Topics {
     /// Topics under `prefix` (e.g. `qicp`, or a unique prefix per test).
     #[must_use]
+    ///
+    /// The iceoryx2 configuration is iceoryx2's built-in default (`Config::default()`), whatever
+    /// lies in the working directory.
     pub fn new(prefix: &str) -> Self {
         Self {
             prefix: prefix.trim_end_matches('/').to_string(),
+            config: std::sync::Arc::new(Config::default()),
+            config_file: None,
         }
+    }
+
+    /// These topics in the iceoryx2 configuration of `path` (iceoryx2's TOML format; keys it
+    /// leaves out keep their defaults). Every process of one bridge needs the same settings.
+    pub fn with_config_file(self, path: &std::path::Path) -> Result<Self, ConnectError> {
+        let error = |detail: String| ConnectError::Config {
+            path: path.to_path_buf(),
+            detail,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| error(e.to_string()))?;
+        let config: Config = toml::from_str(&text).map_err(|e| error(e.to_string()))?;
+        Ok(Self {
+            config: std::sync::Arc::new(config),
+            config_file: Some(path.to_path_buf()),
+            ..self
+        })
+    }
+
+    /// The iceoryx2 configuration file given, if any (`None`: the built-in defaults).
+    #[must_use]
+    pub fn config_file(&self) -> Option<&std::path::Path> {
+        self.config_file.as_deref()
     }
 
     /// The scan stream, `<prefix>/scan`.
@@ -236,6 +282,9 @@ pub enum StreamEvent<M> {
         /// Messages lost.
         missing: u64,
     },
+    /// Another publisher sent on the service while the owner was connected (told once per
+    /// intruder): its messages are dropped and counted ([`StreamReport::intruders`]).
+    Intruder,
 }
 
 /// A received scan, read in place from shared memory.
@@ -258,20 +307,29 @@ fn service_name(name: &str) -> Result<ServiceName, ConnectError> {
 
 type SharedNode = std::rc::Rc<Node<Ipc>>;
 
+/// A thread's node, if alive, and the configuration it was made from.
+type CachedNode = (std::rc::Weak<Node<Ipc>>, Option<std::sync::Arc<Config>>);
+
 thread_local! {
     /// The node of this thread's ports, alive while any of them is.
-    static NODE: std::cell::RefCell<std::rc::Weak<Node<Ipc>>> =
-        const { std::cell::RefCell::new(std::rc::Weak::new()) };
+    static NODE: std::cell::RefCell<CachedNode> =
+        const { std::cell::RefCell::new((std::rc::Weak::new(), None)) };
 }
 
-/// The iceoryx2 node of this thread: every port created on a thread shares one node, so a
-/// process such as `qicp match --subscribe` (scan subscriber, pose publisher) registers once,
-/// and has one node to clean up when it exits. (iceoryx2's `ipc` ports stay on the thread
-/// that made them, so a node per thread is a node per port set.)
-fn shared_node() -> Result<SharedNode, ConnectError> {
+/// The iceoryx2 node of this thread for `topics`' configuration: every port created on a
+/// thread with one configuration shares one node, so a process such as
+/// `qicp match --subscribe` (scan subscriber, pose publisher) registers once, and has one node
+/// to clean up when it exits. (iceoryx2's `ipc` ports stay on the thread that made them, so a
+/// node per thread is a node per port set.)
+fn shared_node(topics: &Topics) -> Result<SharedNode, ConnectError> {
     NODE.with(|cell| {
-        if let Some(node) = cell.borrow().upgrade() {
-            return Ok(node);
+        {
+            let cached = cell.borrow();
+            if let (Some(node), Some(config)) = (cached.0.upgrade(), cached.1.as_ref())
+                && **config == *topics.config
+            {
+                return Ok(node);
+            }
         }
         // iceoryx2 warns on stderr that it runs without a config file; qicp needs none.
         // `IOX2_LOG_LEVEL` still overrides this.
@@ -281,7 +339,9 @@ fn shared_node() -> Result<SharedNode, ConnectError> {
         // opened (`cleanup_dead_nodes_on_open`), and qicp's waits do it on their ticks. The
         // node-wide scans when a node is created and dropped (~1 ms each: every node's
         // details are read and parsed) add nothing to that.
-        let mut config = iceoryx2::config::Config::global_config().clone();
+        // The configuration is the topics' own, never `Config::global_config()`: that one is
+        // whatever `config/iceoryx2.toml` lies in the working directory.
+        let mut config = (*topics.config).clone();
         config.global.node.cleanup_dead_nodes_on_creation = false;
         config.global.node.cleanup_dead_nodes_on_destruction = false;
         let node = std::rc::Rc::new(
@@ -290,9 +350,48 @@ fn shared_node() -> Result<SharedNode, ConnectError> {
                 .create::<Ipc>()
                 .map_err(|e| ConnectError::Node { detail: detail(e) })?,
         );
-        *cell.borrow_mut() = std::rc::Rc::downgrade(&node);
+        *cell.borrow_mut() = (
+            std::rc::Rc::downgrade(&node),
+            Some(std::sync::Arc::clone(&topics.config)),
+        );
         Ok(node)
     })
+}
+
+/// Refuses a service that allows more than one publisher: its subscribers could see two
+/// streams mixed.
+fn single_owner(service: &str, max_publishers: usize) -> Result<(), ConnectError> {
+    if max_publishers == MAX_PUBLISHERS {
+        Ok(())
+    } else {
+        Err(ConnectError::NotSingleOwner {
+            service: service.to_string(),
+            max_publishers,
+        })
+    }
+}
+
+/// Creates the one publisher of `service`. A killed owner keeps its slot until its dead node
+/// is removed, so a new publisher removes dead nodes before it gives up; a live owner makes
+/// it fail with [`ConnectError::Owned`].
+fn create_owner<P>(
+    node: &Node<Ipc>,
+    service: &str,
+    create: impl Fn() -> Result<P, PublisherCreateError>,
+) -> Result<P, ConnectError> {
+    let fail = |e: PublisherCreateError| match e {
+        PublisherCreateError::ExceedsMaxSupportedPublishers => ConnectError::Owned {
+            service: service.to_string(),
+        },
+        e => port_error("publisher", service, e),
+    };
+    match create() {
+        Err(PublisherCreateError::ExceedsMaxSupportedPublishers) => {
+            node.try_cleanup_dead_nodes();
+            create().map_err(fail)
+        }
+        other => other.map_err(fail),
+    }
 }
 
 /// The event half of a stream: wakes the other side.
@@ -384,17 +483,20 @@ struct PublisherCore {
     sent: u64,
     /// `SUBSCRIBER_READY` events seen since this publisher appeared.
     ready: std::cell::Cell<u64>,
+    /// [`publisher_identity`] of the port, written into every message.
+    identity: u64,
 }
 
 impl PublisherCore {
     /// A publisher's shared state, before anything has been sent.
-    fn new(service: String, signals: Signals, node: SharedNode) -> Self {
+    fn new(service: String, signals: Signals, node: SharedNode, unique_id: u128) -> Self {
         Self {
             service,
             signals,
             node,
             sent: 0,
             ready: std::cell::Cell::new(0),
+            identity: publisher_identity(unique_id),
         }
     }
 
@@ -410,7 +512,8 @@ impl PublisherCore {
         subscribers: &dyn Fn() -> usize,
         holds: &dyn Fn(usize, u64) -> bool,
     ) -> Result<bool, ReceiveError> {
-        let deadline = Instant::now() + timeout;
+        // A timeout beyond what an `Instant` can hold waits without a deadline.
+        let deadline = Instant::now().checked_add(timeout);
         let wait_error = |detail| ReceiveError::Wait {
             service: self.service.clone(),
             detail,
@@ -429,10 +532,11 @@ impl PublisherCore {
                 return Ok(true);
             }
             let now = Instant::now();
-            if now >= deadline || self.interrupted() {
+            if deadline.is_some_and(|d| now >= d) || self.interrupted() {
                 return Ok(false);
             }
-            let step = (deadline - now).min(Duration::from_millis(200));
+            let step = deadline.map_or(Duration::MAX, |d| d - now);
+            let step = step.min(Duration::from_millis(200));
             let seen = self.signals.wait(step).map_err(wait_error)?;
             self.ready.set(self.ready.get() + seen.ready);
         }
@@ -458,6 +562,8 @@ pub struct ScanPublisher {
     core: PublisherCore,
     backpressure: BackPressure,
     blocked: Arc<AtomicU64>,
+    /// A subscriber was connected at some send: in `block` mode, none being left is an error.
+    had_subscriber: bool,
 }
 
 fn scan_service_builder(
@@ -504,46 +610,51 @@ fn open_error(service: &str, requested: BackPressure, e: impl std::fmt::Debug) -
 
 impl ScanPublisher {
     /// Opens (or creates) `<prefix>/scan` and a publisher on it.
+    /// Fails with [`ConnectError::Owned`] if another publisher owns the service.
     pub fn create(topics: &Topics, options: &PublisherOptions) -> Result<Self, ConnectError> {
         let name = topics.scan();
-        let node = shared_node()?;
+        let node = shared_node(topics)?;
         let service = scan_service_builder(&node, &service_name(&name)?)
             .enable_safe_overflow(options.backpressure.safe_overflow())
             .open_or_create()
             .map_err(|e| open_error(&name, options.backpressure, e))?;
+        single_owner(&name, service.static_config().max_publishers())?;
         // Listen before registering: a subscriber's READY answers our registration.
         let signals = Signals::open(&node, &name)?;
         let blocked = Arc::new(AtomicU64::new(0));
-        let counter = Arc::clone(&blocked);
         let block_timeout = options.block_timeout;
-        let publisher = service
-            .publisher_builder()
-            .initial_max_slice_len(options.beams.max(1))
-            .allocation_strategy(if options.fixed_size {
-                AllocationStrategy::Static
-            } else {
-                AllocationStrategy::PowerOfTwo
-            })
-            .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
-            .set_backpressure_handler(move |info: &BackpressureInfo| {
-                if info.retries == 0 {
-                    counter.fetch_add(1, Ordering::Relaxed);
-                }
-                if info.elapsed_time > block_timeout {
-                    BackpressureAction::DiscardDataAndFail
+        let publisher = create_owner(&node, &name, || {
+            let counter = Arc::clone(&blocked);
+            service
+                .publisher_builder()
+                .initial_max_slice_len(options.beams.max(1))
+                .allocation_strategy(if options.fixed_size {
+                    AllocationStrategy::Static
                 } else {
-                    BackpressureAction::Retry
-                }
-            })
-            .create()
-            .map_err(|e| port_error("publisher", &name, e))?;
+                    AllocationStrategy::PowerOfTwo
+                })
+                .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+                .set_backpressure_handler(move |info: &BackpressureInfo| {
+                    if info.retries == 0 {
+                        counter.fetch_add(1, Ordering::Relaxed);
+                    }
+                    if info.elapsed_time > block_timeout {
+                        BackpressureAction::DiscardDataAndFail
+                    } else {
+                        BackpressureAction::Retry
+                    }
+                })
+                .create()
+        })?;
         let _ = signals.notify(event_id::PUBLISHER_CONNECTED);
+        let unique_id = publisher.id().value();
         Ok(Self {
             publisher: Some(publisher),
             service,
-            core: PublisherCore::new(name, signals, node),
+            core: PublisherCore::new(name, signals, node, unique_id),
             backpressure: options.backpressure,
             blocked,
+            had_subscriber: false,
         })
     }
 
@@ -554,6 +665,9 @@ impl ScanPublisher {
     }
 
     /// Publishes `record` as the next scan; returns its sequence number.
+    ///
+    /// In `block` mode, fails with [`PublishError::SubscribersLeft`] once every subscriber
+    /// that was there has left: lossless mode never sends into nothing.
     ///
     /// The ranges are copied once, from the record into the loaned sample: that is the
     /// publisher's write. A source that produces ranges itself should use
@@ -568,7 +682,7 @@ impl ScanPublisher {
 
     /// Publishes a scan whose `beams` ranges `range(i)` computes straight into the loaned
     /// shared memory (e.g. a laser driver decoding its packet in place). `header`'s `seq`,
-    /// `beams`, `kind` and `layout_version` are set here.
+    /// `publisher`, `beams`, `kind` and `layout_version` are set here.
     pub fn publish_with(
         &mut self,
         header: ScanHeader,
@@ -585,9 +699,18 @@ impl ScanPublisher {
         write: impl FnOnce(UninitScan) -> ScanSample,
     ) -> Result<u64, PublishError> {
         let seq = self.core.sent;
+        if self.subscribers() > 0 {
+            self.had_subscriber = true;
+        } else if self.had_subscriber && self.backpressure == BackPressure::Block {
+            return Err(PublishError::SubscribersLeft {
+                service: self.core.service.clone(),
+                sent: seq,
+            });
+        }
         header.layout_version = LAYOUT_VERSION;
         header.kind = crate::messages::KIND_DATA;
         header.seq = seq;
+        header.publisher = self.core.identity;
         header.beams = u32::try_from(beams).map_err(|_| PublishError::TooManyBeams { beams })?;
         let mut sample = self.loan(beams)?;
         *sample.user_header_mut() = header;
@@ -616,7 +739,10 @@ impl ScanPublisher {
     /// Sends the end-of-stream marker (no ranges; its `seq` is the number of scans sent).
     pub fn end_of_stream(&mut self) -> Result<(), PublishError> {
         let mut sample = self.loan(0)?;
-        *sample.user_header_mut() = ScanHeader::end_of_stream(self.core.sent);
+        *sample.user_header_mut() = ScanHeader {
+            publisher: self.core.identity,
+            ..ScanHeader::end_of_stream(self.core.sent)
+        };
         self.deliver(sample.write_from_slice(&[]))
     }
 
@@ -648,6 +774,12 @@ impl ScanPublisher {
     #[must_use]
     pub fn subscribers(&self) -> usize {
         self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// This publisher's identity, written into every message ([`ScanHeader::publisher`]).
+    #[must_use]
+    pub fn identity(&self) -> u64 {
+        self.core.identity
     }
 
     /// Waits (on events, with `timeout`) until at least `n` subscribers are connected and
@@ -702,30 +834,33 @@ pub struct PosePublisher {
 }
 
 impl PosePublisher {
-    /// Opens (or creates) `<prefix>/pose` and a publisher on it.
+    /// Opens (or creates) `<prefix>/pose` and a publisher on it. Fails with
+    /// [`ConnectError::Owned`] if another process (another matcher) already publishes poses
+    /// there.
     pub fn create(topics: &Topics) -> Result<Self, ConnectError> {
         let name = topics.pose();
-        let node = shared_node()?;
+        let node = shared_node(topics)?;
         let service = pose_service_builder(&node, &service_name(&name)?)
             .open_or_create()
             .map_err(|e| open_error(&name, BackPressure::DropOldest, e))?;
+        single_owner(&name, service.static_config().max_publishers())?;
         let signals = Signals::open(&node, &name)?;
-        let publisher = service
-            .publisher_builder()
-            .create()
-            .map_err(|e| port_error("publisher", &name, e))?;
+        let publisher = create_owner(&node, &name, || service.publisher_builder().create())?;
         let _ = signals.notify(event_id::PUBLISHER_CONNECTED);
+        let unique_id = publisher.id().value();
         Ok(Self {
             publisher: Some(publisher),
             service,
-            core: PublisherCore::new(name, signals, node),
+            core: PublisherCore::new(name, signals, node, unique_id),
         })
     }
 
-    /// Publishes one pose; `message.seq` is set here. Returns the sequence number.
+    /// Publishes one pose; `message.seq` and `message.publisher` are set here. Returns the
+    /// sequence number.
     pub fn publish(&mut self, mut message: PoseMessage) -> Result<u64, PublishError> {
         let seq = self.core.sent;
         message.seq = seq;
+        message.publisher = self.core.identity;
         self.write(message)?;
         self.core.sent += 1;
         Ok(seq)
@@ -733,7 +868,10 @@ impl PosePublisher {
 
     /// Sends the end-of-stream marker.
     pub fn end_of_stream(&mut self) -> Result<(), PublishError> {
-        self.write(PoseMessage::end_of_stream(self.core.sent))
+        self.write(PoseMessage {
+            publisher: self.core.identity,
+            ..PoseMessage::end_of_stream(self.core.sent)
+        })
     }
 
     fn write(&self, message: PoseMessage) -> Result<(), PublishError> {
@@ -786,6 +924,24 @@ impl Drop for PosePublisher {
     }
 }
 
+/// Whether the publisher with iceoryx2's unique id `id` is still registered on the service (a
+/// killed one stays until its dead node is removed).
+fn publisher_connected(
+    list: impl FnOnce(&mut dyn FnMut(&PublisherDetails) -> CallbackProgression),
+    id: u128,
+) -> bool {
+    let mut found = false;
+    list(&mut |details| {
+        found = details.publisher_id.value() == id;
+        if found {
+            CallbackProgression::Stop
+        } else {
+            CallbackProgression::Continue
+        }
+    });
+    found
+}
+
 /// What the receive loop needs to know of one sample.
 struct Meta {
     version: u32,
@@ -805,6 +961,7 @@ fn run_loop<S>(
     receive: &dyn Fn() -> Result<Option<S>, String>,
     attach: &dyn Fn() -> Result<(), String>,
     publishers: &dyn Fn() -> usize,
+    connected: &dyn Fn(u128) -> bool,
     meta: &dyn Fn(&S) -> Meta,
     deliver: &mut dyn FnMut(StreamEvent<&S>) -> ControlFlow<()>,
 ) -> Result<StreamReport, ReceiveError> {
@@ -856,19 +1013,31 @@ fn run_loop<S>(
                     expected: LAYOUT_VERSION,
                 });
             }
+            // One owner: another publisher's message (data or end marker) is never mixed in
+            // while the owner is connected.
+            match tracker.admit(m.origin, connected) {
+                Admission::Admitted => {}
+                Admission::Succeeds => {
+                    if deliver(StreamEvent::PublisherLost).is_break() {
+                        return Ok(tracker.finish(StreamEnd::Stopped));
+                    }
+                }
+                Admission::Intruder { first } => {
+                    if first && deliver(StreamEvent::Intruder).is_break() {
+                        return Ok(tracker.finish(StreamEnd::Stopped));
+                    }
+                    continue;
+                }
+            }
             if m.kind == KIND_END_OF_STREAM {
                 tracker.end_of_stream(m.origin, m.seq);
                 return Ok(tracker.finish(StreamEnd::EndOfStream));
             }
-            let replaced = tracker.has_open_stream();
             let event = match tracker.observe(m.origin, m.seq) {
                 Observation::OutOfOrder => continue,
                 Observation::InOrder => None,
                 Observation::Gap { missing } => Some(StreamEvent::Gap { missing }),
                 Observation::NewPublisher { skipped } => {
-                    if replaced && deliver(StreamEvent::PublisherLost).is_break() {
-                        return Ok(tracker.finish(StreamEnd::Stopped));
-                    }
                     Some(StreamEvent::PublisherJoined { skipped })
                 }
             };
@@ -981,7 +1150,7 @@ impl ScanSubscriber {
     pub fn create(topics: &Topics, options: &SubscriberOptions) -> Result<Self, ConnectError> {
         let name = topics.scan();
         let (history, buffer) = subscriber_limits(options, SCAN_HISTORY_MAX, SCAN_BUFFER_MAX)?;
-        let node = shared_node()?;
+        let node = shared_node(topics)?;
         let sname = service_name(&name)?;
         let service = open_adopting(&name, options.backpressure, |overflow| {
             let b = scan_service_builder(&node, &sname);
@@ -990,6 +1159,7 @@ impl ScanSubscriber {
                 None => b.open().map_err(Attempt::Open),
             }
         })?;
+        single_owner(&name, service.static_config().max_publishers())?;
         let subscriber = service
             .subscriber_builder()
             .buffer_size(buffer)
@@ -1034,6 +1204,7 @@ impl ScanSubscriber {
             &|| port.receive().map_err(detail),
             &|| port.update_connections().map_err(detail),
             &|| self.service.dynamic_config().number_of_publishers(),
+            &|id| publisher_connected(|f| self.service.dynamic_config().list_publishers(f), id),
             &|s: &Sample<Ipc, [f64], ScanHeader>| Meta {
                 version: s.user_header().layout_version,
                 kind: s.user_header().kind,
@@ -1051,6 +1222,7 @@ impl ScanSubscriber {
                     }
                     StreamEvent::PublisherLost => StreamEvent::PublisherLost,
                     StreamEvent::Gap { missing } => StreamEvent::Gap { missing },
+                    StreamEvent::Intruder => StreamEvent::Intruder,
                 })
             },
         )
@@ -1117,10 +1289,11 @@ impl PoseSubscriber {
     pub fn create(topics: &Topics, options: &SubscriberOptions) -> Result<Self, ConnectError> {
         let name = topics.pose();
         let (history, buffer) = subscriber_limits(options, POSE_HISTORY_MAX, POSE_BUFFER_MAX)?;
-        let node = shared_node()?;
+        let node = shared_node(topics)?;
         let service = pose_service_builder(&node, &service_name(&name)?)
             .open_or_create()
             .map_err(|e| open_error(&name, BackPressure::DropOldest, e))?;
+        single_owner(&name, service.static_config().max_publishers())?;
         let subscriber = service
             .subscriber_builder()
             .buffer_size(buffer)
@@ -1157,6 +1330,7 @@ impl PoseSubscriber {
             &|| port.receive().map_err(detail),
             &|| port.update_connections().map_err(detail),
             &|| self.service.dynamic_config().number_of_publishers(),
+            &|id| publisher_connected(|f| self.service.dynamic_config().list_publishers(f), id),
             &|s: &Sample<Ipc, PoseMessage, ()>| Meta {
                 version: s.payload().layout_version,
                 kind: s.payload().kind,
@@ -1171,6 +1345,7 @@ impl PoseSubscriber {
                     }
                     StreamEvent::PublisherLost => StreamEvent::PublisherLost,
                     StreamEvent::Gap { missing } => StreamEvent::Gap { missing },
+                    StreamEvent::Intruder => StreamEvent::Intruder,
                 })
             },
         )
