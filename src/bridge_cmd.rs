@@ -984,7 +984,10 @@ pub struct ParkBenchArgs {
     /// Runs of each arm, interleaved (in-process, two-process, in-process, …).
     #[arg(long, default_value_t = 7)]
     pub runs: usize,
-    /// Scratch directory for the outputs (default: a fresh one under the system temp dir).
+    /// Scratch directory for the outputs: must not exist yet (it is created) or be an empty
+    /// directory of this user, not a link; it is made private (0700) and kept. Default: a
+    /// fresh private directory with a random name under the system's temp dir, removed at
+    /// the end.
     #[arg(long)]
     pub scratch: Option<PathBuf>,
     /// Print one JSON object instead of a line.
@@ -1146,10 +1149,8 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
     }
     anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
     let exe = std::env::current_exe().context("locating the qicp binary")?;
-    let scratch = args.scratch.clone().unwrap_or_else(|| {
-        std::env::temp_dir().join(format!("qicp-bench-park-{}", std::process::id()))
-    });
-    std::fs::create_dir_all(&scratch)?;
+    let scratch = Scratch::prepare(args.scratch.as_deref())?;
+    let scratch = scratch.path();
     let config = args.config.to_string_lossy().to_string();
     let kind = args.matcher.name();
     let spawn =
@@ -1177,6 +1178,7 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
     let mut scans = 0;
     for run in 0..args.runs {
         let one = scratch.join("in-process");
+        Scratch::clear(&one)?;
         let one_s = one.to_string_lossy().to_string();
         let cpu0 = children_cpu_s();
         let t0 = Instant::now();
@@ -1197,8 +1199,8 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
         add(&mut inproc_cpu, cpu0);
 
         let two = scratch.join("two-process");
+        Scratch::clear(&two)?;
         let two_s = two.to_string_lossy().to_string();
-        let _ = std::fs::remove_file(two.join("trajectory.tum"));
         let prefix = format!("qicp-bench-park-{}-{run}", std::process::id());
         let cpu0 = children_cpu_s();
         let t0 = Instant::now();
@@ -1266,8 +1268,148 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
         );
     }
     anyhow::ensure!(report.identical, "the two-process trajectory differs");
-    if args.scratch.is_none() {
-        let _ = std::fs::remove_dir_all(&scratch);
-    }
     Ok(())
+}
+
+/// The scratch directory of `qicp bench bridge-park`, private to this user so that nobody
+/// can plant a link in it for the runs to write through.
+#[derive(Debug)]
+enum Scratch {
+    /// Fresh, random name, 0700, removed when dropped.
+    Temporary(tempfile::TempDir),
+    /// The user's `--scratch`, kept.
+    Given(PathBuf),
+}
+
+impl Scratch {
+    /// A fresh private directory, or the user's `given` one if it does not exist yet (it is
+    /// created, 0700) or is an empty directory of this user that is not a link (it is made
+    /// 0700).
+    fn prepare(given: Option<&Path>) -> Result<Self> {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+        let Some(dir) = given else {
+            let dir = tempfile::Builder::new()
+                .prefix("qicp-bench-park-")
+                .permissions(std::fs::Permissions::from_mode(0o700))
+                .tempdir()
+                .context("creating a scratch directory")?;
+            return Ok(Scratch::Temporary(dir));
+        };
+        let refuse = |why: &str| anyhow::anyhow!("--scratch {}: {why}", dir.display());
+        match std::fs::symlink_metadata(dir) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                // mkdir does not follow a link planted meanwhile: it fails on any entry.
+                std::fs::DirBuilder::new()
+                    .mode(0o700)
+                    .create(dir)
+                    .with_context(|| format!("creating --scratch {}", dir.display()))?;
+            }
+            Err(e) => return Err(e).with_context(|| format!("--scratch {}", dir.display())),
+            Ok(meta) if meta.file_type().is_symlink() => {
+                return Err(refuse("is a symbolic link; give a directory"));
+            }
+            Ok(meta) if !meta.is_dir() => return Err(refuse("is not a directory")),
+            Ok(meta) => {
+                let me = tempfile::tempfile()
+                    .and_then(|f| f.metadata())
+                    .context("finding this process's user")?
+                    .uid();
+                if meta.uid() != me {
+                    return Err(refuse("belongs to another user"));
+                }
+                if let Some(entry) = std::fs::read_dir(dir)?.next() {
+                    return Err(refuse(&format!(
+                        "is not empty (it holds {:?}); give a new or an empty directory",
+                        entry?.file_name()
+                    )));
+                }
+                std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))?;
+            }
+        }
+        Ok(Scratch::Given(dir.to_path_buf()))
+    }
+
+    fn path(&self) -> &Path {
+        match self {
+            Scratch::Temporary(dir) => dir.path(),
+            Scratch::Given(dir) => dir,
+        }
+    }
+
+    /// Removes a run's output directory before the run (a link is removed, never followed).
+    fn clear(dir: &Path) -> Result<()> {
+        match std::fs::symlink_metadata(dir) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+            Err(e) => Err(e).with_context(|| format!("clearing {}", dir.display())),
+            Ok(meta) if meta.is_dir() => {
+                std::fs::remove_dir_all(dir).with_context(|| format!("clearing {}", dir.display()))
+            }
+            Ok(_) => {
+                std::fs::remove_file(dir).with_context(|| format!("clearing {}", dir.display()))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    fn mode(p: &Path) -> u32 {
+        std::fs::metadata(p).expect("metadata").permissions().mode() & 0o777
+    }
+
+    /// Issue 14: the default scratch was `/tmp/qicp-bench-park-<pid>`, reused if it existed.
+    #[test]
+    fn default_scratch_is_fresh_private_and_unpredictable() {
+        let a = Scratch::prepare(None).expect("scratch");
+        let b = Scratch::prepare(None).expect("scratch");
+        assert_ne!(a.path(), b.path());
+        assert_eq!(mode(a.path()), 0o700);
+        let name = a.path().file_name().expect("name").to_string_lossy();
+        assert!(name.starts_with("qicp-bench-park-"), "{name}");
+        assert!(
+            !name.contains(&std::process::id().to_string()),
+            "predictable: {name}"
+        );
+        let path = a.path().to_path_buf();
+        drop(a);
+        assert!(!path.exists(), "a temporary scratch is removed");
+    }
+
+    #[test]
+    fn given_scratch_is_created_private_or_must_be_empty() {
+        let root = tempfile::tempdir().expect("root");
+        let new = root.path().join("new");
+        let made = Scratch::prepare(Some(&new)).expect("created");
+        assert_eq!(mode(made.path()), 0o700);
+        drop(made);
+        assert!(new.is_dir(), "a given scratch is kept");
+        // Empty and open to all: accepted, and closed.
+        std::fs::set_permissions(&new, std::fs::Permissions::from_mode(0o777)).expect("chmod");
+        Scratch::prepare(Some(&new)).expect("empty is fine");
+        assert_eq!(mode(&new), 0o700);
+        // Something planted inside: refused.
+        std::os::unix::fs::symlink("/etc/passwd", new.join("in-process")).expect("link");
+        let err = Scratch::prepare(Some(&new)).expect_err("not empty");
+        assert!(err.to_string().contains("not empty"), "{err}");
+        // A link to a directory: refused.
+        let link = root.path().join("link");
+        std::os::unix::fs::symlink(root.path(), &link).expect("link");
+        let err = Scratch::prepare(Some(&link)).expect_err("a link");
+        assert!(err.to_string().contains("symbolic link"), "{err}");
+    }
+
+    #[test]
+    fn clearing_a_run_directory_removes_a_link_not_its_target() {
+        let root = tempfile::tempdir().expect("root");
+        let victim = root.path().join("victim");
+        std::fs::create_dir(&victim).expect("victim");
+        std::fs::write(victim.join("keep"), "x").expect("file");
+        let run = root.path().join("two-process");
+        std::os::unix::fs::symlink(&victim, &run).expect("link");
+        Scratch::clear(&run).expect("clear");
+        assert!(!run.exists() && victim.join("keep").exists());
+    }
 }

@@ -167,3 +167,47 @@ fn missing_iceoryx2_config_is_refused_naming_the_file() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("/nonexistent/qicp-iceoryx2.toml"), "{err}");
 }
+
+/// Issue 14: `qicp bench bridge-park` wrote through a link planted in its scratch directory
+/// (another user's file was overwritten). A given scratch must be new or empty, and never a
+/// link.
+#[test]
+fn bench_park_refuses_a_scratch_dir_with_a_planted_link_and_spares_its_target() {
+    let dir = scratch("park-link");
+    let victim = dir.join("victim.tum");
+    std::fs::write(&victim, "precious\n").expect("victim");
+    let planted = dir.join("scratch");
+    std::fs::create_dir(&planted).expect("scratch");
+    std::fs::create_dir(planted.join("two-process")).expect("run dir");
+    std::os::unix::fs::symlink(&victim, planted.join("two-process/trajectory.tum")).expect("link");
+    let out = qicp(&[
+        "bench",
+        "bridge-park",
+        PARK,
+        "--runs",
+        "1",
+        "--scratch",
+        &planted.to_string_lossy(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("not empty"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(&victim).expect("victim"),
+        "precious\n"
+    );
+
+    let linked = dir.join("linked-scratch");
+    std::os::unix::fs::symlink(&dir, &linked).expect("link");
+    let out = qicp(&[
+        "bench",
+        "bridge-park",
+        PARK,
+        "--scratch",
+        &linked.to_string_lossy(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("symbolic link"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
