@@ -346,6 +346,8 @@ const STEERING_COMMON: &[&str] = &[
     "relevance.tau_max",
     "relevance.rho_max_deg",
     "relevance.map_resolution",
+    "relevance.min_novelty",
+    "relevance.novelty_distance",
     "motion.sigma_xy_per_m",
     "motion.sigma_theta_per_m_deg",
     "validation.inlier_distance",

@@ -140,6 +140,7 @@ fn sabotaged(at: usize, validation: ValidationParams) -> Pipeline<Sabotaged<Plai
         tau_max: 0.0,
         rho_max_deg: 0.0,
         map_resolution: Some(0.0),
+        ..Relevance::default()
     };
     Pipeline::new(
         "sabotaged",
@@ -296,4 +297,29 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     }
     println!("full density: {sizes:?}");
     assert!(sizes[2] as f64 > 2.5 * sizes[0] as f64, "{sizes:?}");
+}
+
+#[test]
+fn revisits_add_nothing_to_a_map_with_the_novelty_gate() {
+    let world = SyntheticWorld::room();
+    let laps = |min_novelty: f64| {
+        let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
+        config.relevance.min_novelty = min_novelty;
+        let mut pipeline = config.build().expect("builds");
+        let mut after_loop = Vec::new();
+        for k in 0..400 {
+            let e = pipeline.process(&loop_record(&world, k));
+            assert!(e.pose.distance(&on_loop(k)) < 0.05, "step {k}: {e:?}");
+            if k % 40 == 39 {
+                after_loop.push(pipeline.reference_points().len());
+            }
+        }
+        after_loop
+    };
+    let gated = laps(0.02);
+    let open = laps(0.0);
+    println!("novelty gate 0.02: {gated:?}; without: {open:?}");
+    // With the gate, nine more laps add almost nothing; without it the map keeps growing.
+    assert!(gated[9] as f64 <= 1.05 * gated[0] as f64, "{gated:?}");
+    assert!(open[9] as f64 > 1.2 * open[0] as f64, "{open:?}");
 }
