@@ -6,6 +6,8 @@
 //!   publishes, publish the poses, write the outputs of `qicp match`;
 //! - `qicp bench bridge [--json]`: one-way latency and throughput, iceoryx2 against a
 //!   Unix-domain socket carrying the same bytes;
+//! - `qicp bench bridge --sizes 2k,64k,1m,4m [--json]`: where zero copy pays, payload size by
+//!   payload size: latency, messages/s and CPU time per message ([`payload_bench`]);
 //! - `qicp bench bridge-park [CONFIG] [--runs N] [--json]`: wall and CPU time of a whole drive
 //!   simulated and matched in one process, against `qicp sim --publish` feeding
 //!   `qicp match --subscribe`.
@@ -26,6 +28,8 @@ use serde::Serialize;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+pub mod payload_bench;
 
 /// The longest wait any timing option accepts (s): one day. A bound catches `inf`, `1e300` and
 /// a typo, and keeps every wait a valid `Duration`.
@@ -639,15 +643,29 @@ pub fn run_subscribe(
 /// Arguments of `qicp bench bridge`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct BridgeBenchArgs {
-    /// Messages per latency run (each waits for the previous one to arrive).
+    /// Messages per latency run (each waits for the previous one to arrive); with --sizes, at
+    /// most this many, and at most 2 GiB of payload.
     #[arg(long, default_value_t = 2000)]
     pub messages: usize,
-    /// Messages per throughput run (sent back to back).
+    /// Messages per throughput run (sent back to back); with --sizes, at most this many, and
+    /// at most 1 GiB of payload.
     #[arg(long, default_value_t = 20000)]
     pub burst: usize,
-    /// Beams per scan.
+    /// Beams per scan (scans through the scan service; not with --sizes).
     #[arg(long, default_value_t = 181)]
     pub beams: usize,
+    /// Payload sizes to measure instead of scans, e.g. `2k,64k,1m,4m` (bytes; k = 1024,
+    /// m = 1024²): latency, messages/s and CPU time per message of iceoryx2 (written and read
+    /// in place) and of the socket, size by size. JSON:
+    /// `{"sizes": [{"bytes", "iceoryx2": {"p50_us", "p99_us", "msgs_per_s", "cpu_us_per_msg"},
+    /// "uds": {…}, …}], …}`.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_parser = payload_bench::parse_size,
+        conflicts_with = "beams"
+    )]
+    pub sizes: Vec<usize>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -702,6 +720,16 @@ pub struct BridgeBenchReport {
 
 /// Runs `qicp bench bridge`.
 pub fn run_bench(args: &BridgeBenchArgs) -> Result<()> {
+    if !args.sizes.is_empty() {
+        let report =
+            payload_bench::payload_bench(&args.sizes, args.messages, args.burst, args.wait)?;
+        if args.json {
+            println!("{}", serde_json::to_string(&report)?);
+        } else {
+            payload_bench::print_table(&report);
+        }
+        return Ok(());
+    }
     let report = bridge_bench(args)?;
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

@@ -72,3 +72,64 @@ fn brute_force_is_null_above_twenty_thousand_points() {
     assert!(v["indexes"]["quadtree"].is_object());
     assert_eq!(v["agree"], Value::Bool(true));
 }
+
+fn bench_bridge(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(["bench", "bridge"])
+        .args(args)
+        .output()
+        .expect("the qicp binary runs")
+}
+
+/// `qicp bench bridge --sizes … --json`: one entry per size, both transports with every
+/// documented key. Shape only: the figures themselves are measured, not asserted.
+#[test]
+fn bench_bridge_sizes_json_has_every_key_per_size() {
+    let out = bench_bridge(&[
+        "--sizes",
+        "2k,16k",
+        "--messages",
+        "20",
+        "--burst",
+        "60",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "qicp bench bridge --sizes failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).expect("stdout is one JSON object");
+    let sizes = v["sizes"].as_array().expect("sizes");
+    assert_eq!(sizes.len(), 2, "{v}");
+    for (entry, bytes) in sizes.iter().zip([2048, 16384]) {
+        assert_eq!(entry["bytes"], bytes, "{v}");
+        assert_eq!(entry["messages"], 20, "{v}");
+        assert_eq!(entry["burst"], 60, "{v}");
+        for transport in ["iceoryx2", "uds"] {
+            for key in ["p50_us", "p99_us", "msgs_per_s"] {
+                positive(entry, &format!("/{transport}/{key}"));
+            }
+            let cpu = &entry[transport]["cpu_us_per_msg"];
+            assert!(
+                cpu.is_null() || cpu.as_f64().is_some_and(|c| c >= 0.0),
+                "cpu_us_per_msg = {cpu} in {v}"
+            );
+        }
+        positive(entry, "/p50_ratio");
+    }
+    assert_eq!(v["wait"], "event");
+}
+
+#[test]
+fn bench_bridge_sizes_refuses_a_bad_size_and_beams() {
+    for args in [
+        &["--sizes", "0"][..],
+        &["--sizes", "2x"],
+        &["--sizes", "1g"],
+        &["--sizes", "2k", "--beams", "181"],
+    ] {
+        let out = bench_bridge(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?} accepted");
+    }
+}

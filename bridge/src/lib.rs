@@ -10,6 +10,8 @@
 //! - [`ScanPublisher`], [`ScanSubscriber`], [`PosePublisher`], [`PoseSubscriber`]: typed ports
 //!   on the services `<prefix>/scan` and `<prefix>/pose` (see [`Topics`]);
 //! - [`sequence`]: the sequence-number bookkeeping that makes every loss visible;
+//! - [`payload`]: opaque byte payloads of any size, written and read in place (what
+//!   `qicp bench bridge --sizes` measures against a Unix-domain socket);
 //! - one owner per service: a second publisher on a stream is refused
 //!   ([`ConnectError::Owned`]), and every message names its publisher;
 //! - the iceoryx2 configuration is explicit ([`Topics::with_config_file`]; default iceoryx2's
@@ -28,6 +30,7 @@ mod transport;
 pub use error::{ConnectError, PublishError, ReceiveError};
 pub use messages::{LAYOUT_VERSION, PoseC, PoseMessage, ScanHeader, publisher_identity};
 pub use sequence::{Admission, SequenceTracker, StreamEnd, StreamReport};
+pub use transport::payload;
 pub use transport::{
     BackPressure, DEFAULT_PREFIX, MAX_PUBLISHERS, MAX_SUBSCRIBERS, POSE_BUFFER_MAX,
     POSE_HISTORY_MAX, PosePublisher, PoseSubscriber, PublisherOptions, SCAN_BUFFER_MAX,

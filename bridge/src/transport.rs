@@ -39,6 +39,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+pub mod payload;
+
 /// The default service prefix: services `qicp/scan` and `qicp/pose`.
 pub const DEFAULT_PREFIX: &str = "qicp";
 
