@@ -193,6 +193,8 @@ pub fn publish_records(
     args: &PublishArgs,
 ) -> Result<PublishReport> {
     use std::sync::atomic::{AtomicBool, Ordering};
+    // A bad --iceoryx2-config is refused before the source starts.
+    topics(&args.service_prefix, args.iceoryx2_config.as_deref())?;
     let stop = AtomicBool::new(false);
     std::thread::scope(|scope| {
         let (tx, rx) = std::sync::mpsc::sync_channel(PREFETCH);
@@ -388,6 +390,11 @@ pub fn run_replay(args: ReplayArgs) -> Result<()> {
     if !args.bridge.publish {
         bail!("qicp replay publishes a log: give --publish");
     }
+    // A bad --iceoryx2-config is refused before the log is read.
+    topics(
+        &args.bridge.service_prefix,
+        args.bridge.iceoryx2_config.as_deref(),
+    )?;
     let log = load_for_command(&args.log, args.lenient)?;
     let beams = log
         .records
