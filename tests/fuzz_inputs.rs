@@ -346,3 +346,110 @@ fn matcher_configs_that_validate_build_and_match() {
         "no config validated: the property was never checked"
     );
 }
+
+/// Numbers a neighbour process might put in a message: anything at all, and the usual
+/// suspects.
+fn any_number() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        2 => -100.0..100.0f64,
+        1 => any::<f64>(),
+        1 => prop::sample::select(vec![
+            f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 0.0, -0.0, 1e308, 3e9, -3e9, 1e-320,
+        ]),
+    ]
+}
+
+#[test]
+fn bridge_scan_messages_decode_to_usable_records_or_are_refused() {
+    use qicp_bridge::messages::{FLAG_HAS_TRUTH, PoseC, ScanHeader};
+    let decoded = std::cell::Cell::new(0usize);
+    runner()
+        .run(
+            &(
+                prop::collection::vec(any_number(), 14),
+                any::<bool>(),
+                prop::collection::vec(any_number(), 0..200),
+            ),
+            |(v, truth, ranges)| {
+                let pose = |i: usize| PoseC {
+                    x: v[i],
+                    y: v[i + 1],
+                    theta: v[i + 2],
+                };
+                let header = ScanHeader {
+                    timestamp: v[0],
+                    odometry: pose(1),
+                    truth: pose(4),
+                    laser_offset: pose(7),
+                    angle_min: v[10],
+                    angle_increment: v[11],
+                    max_range: v[12],
+                    min_range: v[13],
+                    beams: ranges.len() as u32,
+                    flags: if truth { FLAG_HAS_TRUTH } else { 0 },
+                    ..ScanHeader::default()
+                };
+                if let Ok(record) = header.to_record(&ranges) {
+                    let limit = qicp_core::index::MAX_COORDINATE;
+                    let usable =
+                        |p: &Pose2| p.is_finite() && p.x.abs() <= limit && p.y.abs() <= limit;
+                    prop_assert!(usable(&record.odometry), "odometry {:?}", record.odometry);
+                    prop_assert!(
+                        usable(&record.laser_offset),
+                        "offset {:?}",
+                        record.laser_offset
+                    );
+                    prop_assert!(
+                        record.truth.is_none_or(|t| usable(&t)),
+                        "truth {:?}",
+                        record.truth
+                    );
+                    prop_assert!(record.timestamp().is_finite());
+                    prop_assert_eq!(record.scan.beams(), ranges.len());
+                    decoded.set(decoded.get() + 1);
+                }
+                Ok(())
+            },
+        )
+        .expect("a decoded scan is usable");
+    assert!(
+        decoded.get() > 0,
+        "no message decoded: the property was never checked"
+    );
+}
+
+#[test]
+fn bridge_scan_with_nan_or_far_odometry_is_refused_not_matched() {
+    use qicp_bridge::messages::{PoseC, ScanHeader};
+    let ranges = [1.0, 2.0, 3.0];
+    let good = ScanHeader {
+        timestamp: 1.0,
+        angle_min: -1.0,
+        angle_increment: 0.5,
+        max_range: 10.0,
+        beams: 3,
+        ..ScanHeader::default()
+    };
+    assert!(good.to_record(&ranges).is_ok());
+    for odometry in [
+        PoseC {
+            x: f64::NAN,
+            y: 0.0,
+            theta: 0.0,
+        },
+        PoseC {
+            x: 0.0,
+            y: 3e9,
+            theta: 0.0,
+        },
+        PoseC {
+            x: 0.0,
+            y: 0.0,
+            theta: f64::INFINITY,
+        },
+    ] {
+        let bad = ScanHeader { odometry, ..good };
+        let why = bad.to_record(&ranges).expect_err("refused").to_string();
+        assert!(why.contains("odometry"), "{why}");
+    }
+}

@@ -160,7 +160,37 @@ impl ScanHeader {
     /// This is the one copy on the receiving side: [`Scan`] owns its `Vec<f64>` of ranges,
     /// so `ranges` (still in shared memory) is copied once into it; the transport itself
     /// copied nothing between the publisher's write into the loaned sample and this read.
+    ///
+    /// Poses must be finite and within ±[`MAX_COORDINATE`](qicp_core::index::MAX_COORDINATE)
+    /// m (the largest coordinate a map holds), as the log readers require: a neighbour's
+    /// garbage is refused here, not matched into a trajectory of NaNs.
     pub fn to_record(&self, ranges: &[f64]) -> Result<Record, ScanError> {
+        let usable = |name: &'static str, p: &PoseC| {
+            let limit = qicp_core::index::MAX_COORDINATE;
+            if !(p.x.is_finite() && p.y.is_finite() && p.x.abs() <= limit && p.y.abs() <= limit) {
+                let value = if p.x.is_finite() && p.x.abs() <= limit {
+                    p.y
+                } else {
+                    p.x
+                };
+                let why = "must be finite and within the map's coordinate range";
+                return Err(ScanError::BadParameter { name, value, why });
+            }
+            if !p.theta.is_finite() {
+                let why = "heading must be finite";
+                return Err(ScanError::BadParameter {
+                    name,
+                    value: p.theta,
+                    why,
+                });
+            }
+            Ok(())
+        };
+        usable("odometry", &self.odometry)?;
+        usable("laser_offset", &self.laser_offset)?;
+        if self.flags & FLAG_HAS_TRUTH != 0 {
+            usable("truth", &self.truth)?;
+        }
         Ok(Record {
             scan: Scan::new(self.timestamp, self.geometry(), ranges.to_vec())?,
             odometry: self.odometry.into(),
