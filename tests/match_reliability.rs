@@ -16,6 +16,13 @@ fn qicp(args: &[&str]) -> Output {
         .expect("runs qicp")
 }
 
+/// `qicp match LOG --matcher wsm --out OUT EXTRA…`.
+fn match_wsm(log: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["match", s(log), "--matcher", "wsm", "--out", s(out)];
+    args.extend_from_slice(extra);
+    qicp(&args)
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -65,7 +72,7 @@ fn logs_without_laser_records_are_an_error() {
     ] {
         let log = file(dir.path(), name, &text);
         let out = dir.path().join(format!("out-{name}"));
-        let o = qicp(&["match", s(&log), "--matcher", "wsm", "--out", s(&out)]);
+        let o = match_wsm(&log, &out, &[]);
         assert!(!o.status.success(), "{name} accepted");
         assert!(
             stderr(&o).contains("no laser records"),
@@ -90,7 +97,7 @@ fn bad_out_fails_before_the_log_is_matched() {
     );
     let blocker = file(dir.path(), "a-file", "");
     let out = blocker.join("out");
-    let o = qicp(&["match", s(&log), "--matcher", "wsm", "--out", s(&out)]);
+    let o = match_wsm(&log, &out, &[]);
     assert!(!o.status.success());
     let why = stderr(&o);
     assert!(why.contains(s(&out)) && !why.contains("log.clf"), "{why}");
@@ -106,16 +113,7 @@ fn bad_relations_fail_before_the_log_is_matched() {
     );
     let out = dir.path().join("out");
     let missing = dir.path().join("absent.relations");
-    let o = qicp(&[
-        "match",
-        s(&log),
-        "--matcher",
-        "wsm",
-        "--out",
-        s(&out),
-        "--relations",
-        s(&missing),
-    ]);
+    let o = match_wsm(&log, &out, &["--relations", s(&missing)]);
     assert!(!o.status.success());
     let why = stderr(&o);
     assert!(
@@ -134,7 +132,7 @@ fn a_failed_run_leaves_no_partial_output() {
     text += "FLASER 3 1\n";
     let log = file(dir.path(), "log.clf", &text);
     let out = dir.path().join("out");
-    let o = qicp(&["match", s(&log), "--matcher", "wsm", "--out", s(&out)]);
+    let o = match_wsm(&log, &out, &[]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("log.clf:21"), "{}", stderr(&o));
     let left: Vec<_> = std::fs::read_dir(&out)
@@ -154,16 +152,7 @@ fn relations_outside_the_log_are_an_error() {
         "1000000 1000001 0.1 0 0 0 0 0\n1000002 1000003 0.1 0 0 0 0 0\n",
     );
     let out = dir.path().join("out");
-    let o = qicp(&[
-        "match",
-        s(&log),
-        "--matcher",
-        "wsm",
-        "--out",
-        s(&out),
-        "--relations",
-        s(&relations),
-    ]);
+    let o = match_wsm(&log, &out, &["--relations", s(&relations)]);
     assert!(!o.status.success(), "no relation scored, yet exit 0");
     assert!(stderr(&o).contains("no relation of"), "{}", stderr(&o));
     // The run itself is complete and kept.
@@ -247,32 +236,14 @@ fn scans_above_max_beams_are_refused_at_once() {
     let dir = scratch();
     let log = file(dir.path(), "wide.clf", &flaser(1.0));
     let out = dir.path().join("out");
-    let o = qicp(&[
-        "match",
-        s(&log),
-        "--matcher",
-        "wsm",
-        "--out",
-        s(&out),
-        "--max-beams",
-        "100",
-    ]);
+    let o = match_wsm(&log, &out, &["--max-beams", "100"]);
     assert!(!o.status.success());
     assert!(
         stderr(&o).contains("181 readings announced"),
         "{}",
         stderr(&o)
     );
-    let o = qicp(&[
-        "match",
-        s(&log),
-        "--matcher",
-        "wsm",
-        "--out",
-        s(&out),
-        "--max-beams",
-        "0",
-    ]);
+    let o = match_wsm(&log, &out, &["--max-beams", "0"]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("max_beams"), "{}", stderr(&o));
 }
