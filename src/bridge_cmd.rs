@@ -15,7 +15,7 @@
 //! Services: `<prefix>/scan` and `<prefix>/pose` (`--service-prefix`, default `qicp`).
 
 use crate::logs::carmen::load_for_command;
-use crate::matching::{Matching, quantile, write_run};
+use crate::matching::{MatchLoop, Matching, RunWriter, quantile, write_run};
 use anyhow::{Context, Result, bail};
 use qicp_bridge::{
     BackPressure, ConnectError, PoseMessage, PosePublisher, PublisherOptions, ScanHeader,
@@ -522,6 +522,9 @@ pub fn run_subscribe(
     args: &SubscribeArgs,
 ) -> Result<()> {
     let topics = topics(&args.prefix, args.iceoryx2_config.as_deref())?;
+    // The outputs are opened before the first scan: a bad --out fails at once, and rows and
+    // poses go to disk as they come (renamed into place at the end), not into memory.
+    let mut writer = out.map(RunWriter::create).transpose()?;
     // The pose publisher first: a second matcher on the same prefix is refused before it
     // subscribes to the scans (where it would hold a block-mode publisher back).
     let mut poses = PosePublisher::create(&topics).map_err(|e| match e {
@@ -546,9 +549,10 @@ pub fn run_subscribe(
         },
     )?;
     let backpressure = scans.backpressure();
-    let mut matching = Matching::new(config)?;
+    let mut matching = MatchLoop::new(config)?;
     let mut rejected = 0u64;
     let mut publish_error = None;
+    let mut write_error = None;
     eprintln!(
         "matching scans from {} ({} mode) with {}",
         topics.scan(),
@@ -559,7 +563,13 @@ pub fn run_subscribe(
         match event {
             StreamEvent::Data(view) => match view.header.to_record(view.ranges) {
                 Ok(record) => {
-                    let estimate = matching.push(&record);
+                    let (estimate, row) = matching.push(&record);
+                    if let Some(w) = &mut writer
+                        && let Err(e) = w.push(record.timestamp(), &estimate.pose, &row)
+                    {
+                        write_error = Some(e);
+                        return ControlFlow::Break(());
+                    }
                     let message = PoseMessage {
                         scan_publisher: view.header.publisher,
                         ..PoseMessage::of(
@@ -606,16 +616,17 @@ pub fn run_subscribe(
     if let Some(e) = publish_error {
         return Err(e).context("publishing a pose");
     }
+    if let Some(e) = write_error {
+        return Err(e);
+    }
     poses.end_of_stream().context("ending the pose stream")?;
 
-    let run = matching.finish();
     let bridge = SubscribeSummary::of(&report, topics.scan(), backpressure, rejected, poses.sent());
-    let mut summary = serde_json::to_value(&run.summary)?;
+    let mut summary = serde_json::to_value(matching.summary())?;
     summary["bridge"] = serde_json::to_value(&bridge)?;
     let text = serde_json::to_string_pretty(&summary)?;
-    if let Some(out) = out {
-        write_run(out, &run, config)?;
-        std::fs::write(out.join("summary.json"), &text).context("writing summary.json")?;
+    if let Some(writer) = writer {
+        writer.commit(config, Some(&text))?;
     }
     if json {
         println!("{text}");

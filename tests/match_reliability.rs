@@ -247,3 +247,26 @@ fn scans_above_max_beams_are_refused_at_once() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("max_beams"), "{}", stderr(&o));
 }
+
+#[test]
+fn subscriber_with_a_bad_out_fails_before_it_waits_for_scans() {
+    let dir = scratch();
+    let blocker = file(dir.path(), "a-file", "");
+    let out = blocker.join("out");
+    let prefix = format!("qicp-bad-out-{}", std::process::id());
+    let o = qicp(&[
+        "match",
+        "--subscribe",
+        "--matcher",
+        "wsm",
+        "--out",
+        s(&out),
+        "--service-prefix",
+        &prefix,
+        "--connect-timeout",
+        "3",
+    ]);
+    assert!(!o.status.success());
+    let why = stderr(&o);
+    assert!(why.contains(s(&out)) && !why.contains("publisher"), "{why}");
+}
