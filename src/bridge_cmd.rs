@@ -14,7 +14,8 @@
 //!
 //! Services: `<prefix>/scan` and `<prefix>/pose` (`--service-prefix`, default `qicp`).
 
-use crate::logs::carmen::load_for_command;
+use crate::logs::LogError;
+use crate::logs::carmen::{CarmenOptions, CarmenReader};
 use crate::matching::{MatchLoop, Matching, RunWriter, quantile, write_run};
 use anyhow::{Context, Result, bail};
 use qicp_bridge::{
@@ -395,14 +396,21 @@ pub fn run_replay(args: ReplayArgs) -> Result<()> {
         &args.bridge.service_prefix,
         args.bridge.iceoryx2_config.as_deref(),
     )?;
-    let log = load_for_command(&args.log, args.lenient)?;
-    let beams = log
-        .records
-        .iter()
-        .map(|r| r.scan.beams())
-        .max()
-        .unwrap_or(1);
-    let report = publish_records(log.records.into_iter().map(Ok), beams, &args.bridge)?;
+    // Scan by scan: the log is read as it is published, never held whole.
+    let options = CarmenOptions {
+        lenient: args.lenient,
+        ..CarmenOptions::default()
+    };
+    let mut reader = CarmenReader::open(&args.log, &options)?;
+    let Some(first) = reader.next().transpose()? else {
+        return Err(LogError::empty(&args.log, &reader.info).into());
+    };
+    // The scan service's slices start at the first scan's size and grow if a later one is
+    // longer.
+    let beams = first.scan.beams();
+    let records = std::iter::once(Ok(first)).chain(reader.by_ref().map(|r| r.map_err(Into::into)));
+    let report = publish_records(records, beams, &args.bridge)?;
+    reader.info.warn(&args.log);
     print_publish_report(&report)
 }
 

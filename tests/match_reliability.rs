@@ -270,3 +270,17 @@ fn subscriber_with_a_bad_out_fails_before_it_waits_for_scans() {
     let why = stderr(&o);
     assert!(why.contains(s(&out)) && !why.contains("publisher"), "{why}");
 }
+
+#[test]
+fn replaying_a_log_without_laser_records_is_an_error() {
+    let dir = scratch();
+    let log = file(
+        dir.path(),
+        "odom-only.clf",
+        "ODOM 0 0 0 0 0 0 1.0 host 1.0\n",
+    );
+    let prefix = format!("qicp-empty-replay-{}", std::process::id());
+    let o = qicp(&["replay", s(&log), "--publish", "--service-prefix", &prefix]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("no laser records"), "{}", stderr(&o));
+}

@@ -83,7 +83,7 @@ const BZIP2_MAGIC: &[u8] = b"BZh";
 /// Opens a text file for buffered reading, decompressing it on the fly when it is bzip2
 /// (recognised by its magic bytes, not its name; concatenated streams as written by `pbzip2`
 /// are read in full).
-pub fn open_text(path: &Path) -> Result<Box<dyn BufRead>, LogError> {
+pub fn open_text(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
     let file = File::open(path).map_err(|e| LogError::io(path, e))?;
     let mut reader = BufReader::with_capacity(1 << 16, file);
     let head = reader.fill_buf().map_err(|e| LogError::io(path, e))?;

@@ -90,7 +90,7 @@ impl<R> std::fmt::Debug for CarmenReader<R> {
     }
 }
 
-impl CarmenReader<Box<dyn BufRead>> {
+impl CarmenReader<Box<dyn BufRead + Send>> {
     /// Opens a CARMEN log, plain or bzip2-compressed.
     pub fn open(path: &Path, opts: &CarmenOptions) -> Result<Self, LogError> {
         let reader = crate::logs::open_text(path)?;
