@@ -252,3 +252,22 @@ fn an_error_ends_the_stream() {
         .to_string();
     assert!(why.contains("bad.clf:2"), "{why}");
 }
+
+#[test]
+fn truepos_without_laser_lines_is_held_within_the_window() {
+    let mut text = String::new();
+    for i in 0..20_000 {
+        let t = i as f64 * 0.1;
+        text += &format!("TRUEPOS 0 0 0 0 0 0 {t} host {t}\n");
+    }
+    let mut reader = CarmenReader::new(text.as_bytes(), "truth.clf", &STRICT).expect("reader");
+    assert!(reader.next().is_none());
+    // The last 5.1 s of truth (52 lines at 10 Hz) are held, not all 20,000 lines.
+    let held: usize = format!("{reader:?}")
+        .split("truepos: ")
+        .nth(1)
+        .and_then(|rest| rest.split(',').next())
+        .and_then(|n| n.trim().parse().ok())
+        .expect("truepos count in Debug");
+    assert!(held <= 52, "{held} truth lines held");
+}

@@ -85,6 +85,7 @@ impl<R> std::fmt::Debug for CarmenReader<R> {
             .field("name", &self.name)
             .field("line", &self.line_no)
             .field("pending", &self.pending.len())
+            .field("truepos", &self.truepos.len())
             .field("info", &self.info)
             .finish_non_exhaustive()
     }
@@ -210,6 +211,11 @@ impl<R: BufRead> CarmenReader<R> {
                     self.newest = self.newest.max(t.0);
                     let at = self.truepos.partition_point(|(s, _)| *s <= t.0);
                     self.truepos.insert(at, t);
+                    // Bounded even without laser lines: a record older than the window
+                    // behind the newest line comes too late for its truth to matter here.
+                    let horizon = self.newest - self.opts.reorder_window - self.opts.truepos_max_dt;
+                    let old = self.truepos.partition_point(|(s, _)| *s < horizon);
+                    self.truepos.drain(..old);
                     if self.keep_side_records {
                         self.all_truepos.push(t);
                     }
