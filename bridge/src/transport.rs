@@ -373,6 +373,16 @@ fn single_owner(service: &str, max_publishers: usize) -> Result<(), ConnectError
     }
 }
 
+/// The back-pressure handler of a block-mode publisher: retry until `block_timeout` has
+/// passed, then give the sample up and fail the send.
+fn give_up_after(block_timeout: Duration, info: &BackpressureInfo) -> BackpressureAction {
+    if info.elapsed_time > block_timeout {
+        BackpressureAction::DiscardDataAndFail
+    } else {
+        BackpressureAction::Retry
+    }
+}
+
 /// Creates the one publisher of `service`. A killed owner keeps its slot until its dead node
 /// is removed, so a new publisher removes dead nodes before it gives up; a live owner makes
 /// it fail with [`ConnectError::Owned`].
@@ -640,11 +650,7 @@ impl ScanPublisher {
                     if info.retries == 0 {
                         counter.fetch_add(1, Ordering::Relaxed);
                     }
-                    if info.elapsed_time > block_timeout {
-                        BackpressureAction::DiscardDataAndFail
-                    } else {
-                        BackpressureAction::Retry
-                    }
+                    give_up_after(block_timeout, info)
                 })
                 .create()
         })?;

@@ -16,10 +16,10 @@ use super::{
     single_owner,
 };
 use crate::error::{ConnectError, PublishError, ReceiveError, detail, port_error};
+use iceoryx2::port::BackpressureInfo;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -96,11 +96,7 @@ impl PayloadPublisher {
                 .allocation_strategy(AllocationStrategy::Static)
                 .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
                 .set_backpressure_handler(move |info: &BackpressureInfo| {
-                    if info.elapsed_time > block_timeout {
-                        BackpressureAction::DiscardDataAndFail
-                    } else {
-                        BackpressureAction::Retry
-                    }
+                    super::give_up_after(block_timeout, info)
                 })
                 .create()
         })?;
