@@ -565,7 +565,7 @@ pub fn run_subscribe(
         "matching scans from {} ({} mode) with {}",
         topics.scan(),
         backpressure.name(),
-        config.kind.name()
+        config.kind()
     );
     let report = scans.run(|event| {
         match event {
@@ -1034,7 +1034,7 @@ pub struct ParkBenchArgs {
     pub config: PathBuf,
     /// Matcher kind.
     #[arg(long, default_value = "q-wsm")]
-    pub matcher: qicp_matchers::MatcherKind,
+    pub matcher: String,
     /// Runs of each arm, interleaved (in-process, two-process, in-process, …).
     #[arg(long, default_value_t = 7)]
     pub runs: usize,
@@ -1124,9 +1124,9 @@ fn load_average() -> [f64; 3] {
 
 /// The in-process arm: simulate the drive and match each scan as it is produced, then write
 /// what `qicp match --subscribe --out` writes (trajectory, per-scan figures, config, summary).
-fn park_in_process(config: &Path, kind: qicp_matchers::MatcherKind, out: &Path) -> Result<()> {
+fn park_in_process(config: &Path, kind: &str, out: &Path) -> Result<()> {
     let cfg = qicp_sim::SimConfig::load(config)?;
-    let mut matcher = MatcherConfig::defaults(kind);
+    let mut matcher = crate::registry().config(kind)?;
     matcher.validate()?;
     matcher.fill_defaults();
     let mut matching = Matching::new(&matcher)?;
@@ -1199,14 +1199,15 @@ fn wait_all(
 /// as fresh processes of this binary, interleaved, `--runs` times each.
 pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
     if let Some(out) = &args.in_process_once {
-        return park_in_process(&args.config, args.matcher, out);
+        return park_in_process(&args.config, &args.matcher, out);
     }
     anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
     let exe = std::env::current_exe().context("locating the qicp binary")?;
     let scratch = Scratch::prepare(args.scratch.as_deref())?;
     let scratch = scratch.path();
     let config = args.config.to_string_lossy().to_string();
-    let kind = args.matcher.name();
+    let kind = crate::registry().config(&args.matcher)?.kind();
+    let kind = kind.as_str();
     let spawn =
         |name: &'static str, argv: &[&str]| -> Result<(&'static str, std::process::Child)> {
             let child = std::process::Command::new(&exe)

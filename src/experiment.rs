@@ -48,7 +48,7 @@ use crate::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_ru
 use crate::plots::{self, Panel, PathSeries, ScanSeries};
 use anyhow::{Context, Result};
 use qicp_core::{Pose2, Record};
-use qicp_matchers::{MatcherConfig, MatcherKind};
+use qicp_matchers::{MatcherConfig, ReferenceKind};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;
@@ -57,13 +57,7 @@ use std::time::Instant;
 use thiserror::Error;
 
 /// The matchers an experiment runs when `[run] matchers` is not given.
-pub const DEFAULT_MATCHERS: [MatcherKind; 5] = [
-    MatcherKind::Idc,
-    MatcherKind::QIdc,
-    MatcherKind::Wsm,
-    MatcherKind::QWsm,
-    MatcherKind::KdWsm,
-];
+pub const DEFAULT_MATCHERS: [&str; 5] = ["idc", "q-idc", "wsm", "q-wsm", "kd-wsm"];
 
 /// Arguments of `qicp run`.
 #[derive(Debug, clap::Args)]
@@ -191,11 +185,11 @@ impl SourceConfig {
 pub struct RunConfig {
     /// Matcher kinds, in report order. Default [`DEFAULT_MATCHERS`].
     #[serde(default = "default_matchers")]
-    pub matchers: Vec<MatcherKind>,
+    pub matchers: Vec<String>,
 }
 
-fn default_matchers() -> Vec<MatcherKind> {
-    DEFAULT_MATCHERS.to_vec()
+fn default_matchers() -> Vec<String> {
+    DEFAULT_MATCHERS.map(String::from).to_vec()
 }
 
 impl Default for RunConfig {
@@ -308,22 +302,33 @@ impl ExperimentConfig {
             ));
         }
         let mut seen = std::collections::BTreeSet::new();
+        let registry = crate::registry();
         for k in &self.run.matchers {
-            if !seen.insert(*k) {
+            if !seen.insert(k) {
                 return Err(invalid("run.matchers", format!("`{k}` is listed twice")));
             }
+            registry.resolve(k).map_err(|_| {
+                invalid(
+                    "run.matchers",
+                    format!(
+                        "unknown matcher kind `{k}`; known: {}",
+                        registry.names().join(", ")
+                    ),
+                )
+            })?;
         }
-        for name in self.matchers.keys() {
-            let kind: MatcherKind = name.parse().map_err(|_| {
+        for kind in self.matchers.keys() {
+            let name = kind;
+            registry.resolve(kind).map_err(|_| {
                 invalid(
                     &format!("matchers.{name}"),
                     format!(
                         "unknown matcher kind; known: {}",
-                        MatcherKind::ALL.map(MatcherKind::name).join(", ")
+                        registry.names().join(", ")
                     ),
                 )
             })?;
-            if !self.run.matchers.contains(&kind) {
+            if !self.run.matchers.contains(kind) {
                 return Err(invalid(
                     &format!("matchers.{name}"),
                     "parameters for a kind that `run.matchers` does not list",
@@ -336,13 +341,13 @@ impl ExperimentConfig {
 
     /// The effective configuration of `kind`: its registry defaults, overridden by its
     /// `[matchers.<kind>]` table.
-    pub fn matcher(&self, kind: MatcherKind) -> Result<MatcherConfig, ExperimentError> {
-        let Some(table) = self.matchers.get(kind.name()) else {
-            return Ok(MatcherConfig::defaults(kind));
-        };
+    pub fn matcher(&self, kind: &str) -> Result<MatcherConfig, ExperimentError> {
         let err = |source| ExperimentError::Matcher {
-            kind: kind.name().into(),
+            kind: kind.into(),
             source,
+        };
+        let Some(table) = self.matchers.get(kind) else {
+            return crate::registry().config(kind).map_err(err);
         };
         if table.contains_key("kind") {
             return Err(err(qicp_matchers::ConfigError::Invalid {
@@ -351,11 +356,11 @@ impl ExperimentConfig {
             }));
         }
         let mut matcher = table.clone();
-        matcher.insert("kind".into(), toml::Value::String(kind.name().into()));
+        matcher.insert("kind".into(), toml::Value::String(kind.into()));
         let mut doc = toml::Table::new();
         doc.insert("matcher".into(), toml::Value::Table(matcher));
         let text = toml::to_string(&doc).map_err(|e| ExperimentError::Parse(e.to_string()))?;
-        MatcherConfig::from_toml(&text).map_err(err)
+        crate::registry().parse(&text).map_err(err)
     }
 
     /// The effective configuration as TOML: the source and run as loaded (paths resolved) and
@@ -363,13 +368,16 @@ impl ExperimentConfig {
     /// experiment that runs the same.
     pub fn effective_toml(&self) -> Result<String, ExperimentError> {
         let mut c = self.clone();
-        for &kind in &self.run.matchers {
+        for kind in &self.run.matchers {
             let m = self.matcher(kind)?;
-            let value =
-                toml::Table::try_from(&m).map_err(|e| ExperimentError::Parse(e.to_string()))?;
-            let mut value = value;
-            value.remove("kind");
-            c.matchers.insert(kind.name().into(), value);
+            let mut value = m.to_table().map_err(|source| ExperimentError::Matcher {
+                kind: kind.clone(),
+                source,
+            })?;
+            for axis in ["algorithm", "reference", "index"] {
+                value.remove(axis);
+            }
+            c.matchers.insert(kind.clone(), value);
         }
         toml::to_string_pretty(&c).map_err(|e| ExperimentError::Parse(e.to_string()))
     }
@@ -528,8 +536,8 @@ pub struct MatcherOutcome {
 }
 
 impl MatcherOutcome {
-    fn kind(&self) -> MatcherKind {
-        self.config.kind
+    fn kind(&self) -> String {
+        self.config.kind()
     }
 
     fn to_json(&self) -> Result<Value> {
@@ -557,14 +565,10 @@ impl MatcherOutcome {
     }
 }
 
-/// The incremental twin of a boosted kind, if any.
+/// The kind of the scan-to-scan twin of a boosted matcher (same algorithm), if it is one.
 #[must_use]
-pub fn incremental_of(kind: MatcherKind) -> Option<MatcherKind> {
-    match kind {
-        MatcherKind::QIdc | MatcherKind::KdIdc => Some(MatcherKind::Idc),
-        MatcherKind::QWsm | MatcherKind::KdWsm => Some(MatcherKind::Wsm),
-        MatcherKind::Idc | MatcherKind::Wsm => None,
-    }
+pub fn incremental_of(config: &MatcherConfig) -> Option<String> {
+    (config.reference == ReferenceKind::Map).then(|| config.algorithm().to_string())
 }
 
 /// Boosted / incremental ratios of every boosted kind whose twin also ran:
@@ -572,7 +576,7 @@ pub fn incremental_of(kind: MatcherKind) -> Option<MatcherKind> {
 fn ratios(outcomes: &[MatcherOutcome]) -> Value {
     let mut out = Map::new();
     for b in outcomes {
-        let Some(inc) = incremental_of(b.kind()) else {
+        let Some(inc) = incremental_of(&b.config) else {
             continue;
         };
         let Some(i) = outcomes.iter().find(|o| o.kind() == inc) else {
@@ -690,11 +694,11 @@ fn run_once(
 
     let show_progress = !args.quiet;
     let mut outcomes = Vec::new();
-    for &kind in &config.run.matchers {
+    for kind in &config.run.matchers {
         let t = Instant::now();
         let matcher = config.matcher(kind)?;
         let run = run_matcher(&source.records, &matcher, show_progress)?;
-        write_run(&out.join(kind.name()), &run, &matcher)?;
+        write_run(&out.join(kind), &run, &matcher)?;
         let scores =
             Scores::of(&run.trajectory, &source).with_context(|| format!("scoring {kind}"))?;
         outcomes.push(MatcherOutcome {
@@ -718,7 +722,7 @@ fn run_once(
 
     let mut matchers = Map::new();
     for o in &outcomes {
-        matchers.insert(o.kind().name().into(), o.to_json()?);
+        matchers.insert(o.kind(), o.to_json()?);
     }
     let mut odo = Map::new();
     odometry_scores.insert_into(&mut odo)?;
@@ -823,10 +827,10 @@ fn run_worlds(
     for kind in &config.run.matchers {
         let mut m = Map::new();
         for figure in WORLD_FIGURES {
-            let values = collect(&|s| &s["matchers"][kind.name()][figure]);
+            let values = collect(&|s| &s["matchers"][kind.as_str()][figure]);
             m.insert(figure.into(), spread(&values));
         }
-        matchers.insert(kind.name().into(), Value::Object(m));
+        matchers.insert(kind.clone(), Value::Object(m));
     }
     let mut ratios = Map::new();
     if let Some(pairs) = summaries[0]["ratios"].as_object() {
@@ -862,7 +866,7 @@ fn run_worlds(
 }
 
 /// The table printed after `--worlds`: median [min-max] of each figure.
-fn worlds_table(report: &Value, kinds: &[MatcherKind]) -> String {
+fn worlds_table(report: &Value, kinds: &[String]) -> String {
     let cell = |v: &Value, scale: f64, digits: usize| match (
         v["median"].as_f64(),
         v["min"].as_f64(),
@@ -890,9 +894,9 @@ fn worlds_table(report: &Value, kinds: &[MatcherKind]) -> String {
             .collect::<Vec<_>>(),
     ];
     for k in kinds {
-        let m = &report["matchers"][k.name()];
+        let m = &report["matchers"][k.as_str()];
         rows.push(
-            std::iter::once(k.name().to_string())
+            std::iter::once(k.to_string())
                 .chain(columns.iter().map(|c| cell(&m[c.1], c.2, c.3)))
                 .collect(),
         );
@@ -1056,12 +1060,12 @@ fn draw_pictures(
     });
     for (k, (o, poses)) in outcomes.iter().zip(&aligned_all).enumerate() {
         series.push(PathSeries {
-            label: o.kind().name().into(),
+            label: o.kind(),
             poses,
             color: plots::PALETTE[k % plots::PALETTE.len()],
             width: 2,
             // kd-tree kinds often coincide with their quad-tree twins: dashed, both show.
-            dashed: matches!(o.kind(), MatcherKind::KdIdc | MatcherKind::KdWsm),
+            dashed: o.config.reference == ReferenceKind::Map && o.config.index() != "quadtree",
         });
     }
     let title = format!("Robot paths, {} scans{aligned_note}", source.records.len());
@@ -1072,19 +1076,23 @@ fn draw_pictures(
     );
 
     // Paper Fig. 4: per family, the boosted matcher in front of the incremental one.
-    let pairs: Vec<(&MatcherOutcome, &MatcherOutcome)> = [
-        (MatcherKind::Idc, [MatcherKind::QIdc, MatcherKind::KdIdc]),
-        (MatcherKind::Wsm, [MatcherKind::QWsm, MatcherKind::KdWsm]),
-    ]
-    .iter()
-    .filter_map(|(inc, boosted)| {
-        let i = outcomes.iter().find(|o| o.kind() == *inc)?;
-        let b = boosted
-            .iter()
-            .find_map(|k| outcomes.iter().find(|o| o.kind() == *k))?;
-        Some((i, b))
-    })
-    .collect();
+    // The quad-tree form first, as the paper draws it.
+    let pairs: Vec<(&MatcherOutcome, &MatcherOutcome)> = outcomes
+        .iter()
+        .filter(|i| i.config.reference == ReferenceKind::Scan)
+        .filter_map(|i| {
+            let twins = || {
+                outcomes.iter().filter(|b| {
+                    b.config.reference == ReferenceKind::Map
+                        && b.config.algorithm() == i.config.algorithm()
+                })
+            };
+            let b = twins()
+                .find(|b| b.config.index() == "quadtree")
+                .or_else(|| twins().next())?;
+            Some((i, b))
+        })
+        .collect();
     if !pairs.is_empty() {
         let (inc_color, boost_color) = (plots::PALETTE[0], plots::PALETTE[1]);
         let residual: Vec<Panel> = pairs
@@ -1097,12 +1105,12 @@ fn draw_pictures(
                 ),
                 series: vec![
                     ScanSeries {
-                        label: i.kind().name().into(),
+                        label: i.kind(),
                         values: i.rows.iter().map(|r| r.residual_mm).collect(),
                         color: inc_color,
                     },
                     ScanSeries {
-                        label: b.kind().name().into(),
+                        label: b.kind(),
                         values: b.rows.iter().map(|r| r.residual_mm).collect(),
                         color: boost_color,
                     },
@@ -1146,7 +1154,7 @@ fn draw_pictures(
 }
 
 /// The table printed after a run.
-fn table(summary: &Value, kinds: &[MatcherKind]) -> String {
+fn table(summary: &Value, kinds: &[String]) -> String {
     let f = |v: &Value, scale: f64, digits: usize| {
         v.as_f64()
             .map_or_else(|| "-".to_string(), |x| format!("{:.digits$}", x * scale))
@@ -1154,7 +1162,7 @@ fn table(summary: &Value, kinds: &[MatcherKind]) -> String {
     let truth = summary["ground_truth"].as_bool().unwrap_or(false);
     let relations = kinds
         .first()
-        .is_some_and(|k| summary["matchers"][k.name()].get("relations").is_some());
+        .is_some_and(|k| summary["matchers"][k.as_str()].get("relations").is_some());
     let mut head = vec!["matcher"];
     if truth {
         head.extend(["ATE m", "RPE %", "final m"]);
@@ -1198,7 +1206,7 @@ fn table(summary: &Value, kinds: &[MatcherKind]) -> String {
     };
     row_of("odometry", &summary["odometry"], false);
     for k in kinds {
-        row_of(k.name(), &summary["matchers"][k.name()], true);
+        row_of(k, &summary["matchers"][k.as_str()], true);
     }
     let widths: Vec<usize> = (0..head.len())
         .map(|c| {

@@ -14,3 +14,15 @@ pub mod matching;
 pub mod plots;
 pub mod sim_cmd;
 pub mod sweep;
+
+use qicp_matchers::Registry;
+use std::sync::LazyLock;
+
+static REGISTRY: LazyLock<Registry> = LazyLock::new(Registry::builtin);
+
+/// The registry the `qicp` command resolves matcher names with: the built-in algorithms and
+/// indexes, and the matchers of the crates this package registers next to them.
+#[must_use]
+pub fn registry() -> &'static Registry {
+    &REGISTRY
+}

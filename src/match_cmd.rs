@@ -6,7 +6,7 @@ use crate::logs::carmen::{CarmenOptions, CarmenReader};
 use crate::logs::relations::read_relations;
 use crate::matching::{MatchLoop, RunWriter, progress_spinner};
 use anyhow::{Context, Result, bail};
-use qicp_matchers::{MatcherConfig, MatcherKind};
+use qicp_matchers::MatcherConfig;
 use std::path::PathBuf;
 
 /// Arguments of `qicp match`.
@@ -15,9 +15,10 @@ pub struct MatchArgs {
     /// CARMEN log (plain or .bz2); not with --subscribe.
     #[arg(required_unless_present = "subscribe")]
     pub log: Option<PathBuf>,
-    /// Matcher kind: idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm. Overrides the config's kind.
+    /// Matcher kind: a composed name such as idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm
+    /// (`qicp matchers` lists them). Overrides the config's kind.
     #[arg(long)]
-    pub matcher: Option<MatcherKind>,
+    pub matcher: Option<String>,
     /// TOML file with a `[matcher]` table (kind and parameters).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -42,22 +43,37 @@ pub struct MatchArgs {
 }
 
 /// Loads the matcher config: a file, a kind, or both (the kind overrides the file's).
-pub fn load_config(file: Option<&PathBuf>, kind: Option<MatcherKind>) -> Result<MatcherConfig> {
+pub fn load_config(file: Option<&PathBuf>, kind: Option<&str>) -> Result<MatcherConfig> {
+    let registry = crate::registry();
     let mut config = match (file, kind) {
         (None, None) => bail!("give --matcher KIND or --config FILE"),
-        (None, Some(kind)) => MatcherConfig::defaults(kind),
+        (None, Some(kind)) => registry.config(kind)?,
         (Some(path), _) => {
-            let text = std::fs::read_to_string(path)
+            let mut text = std::fs::read_to_string(path)
                 .with_context(|| format!("reading {}", path.display()))?;
-            MatcherConfig::from_toml(&text).with_context(|| format!("in {}", path.display()))?
+            if let Some(kind) = kind {
+                text = with_kind(&text, kind).with_context(|| format!("in {}", path.display()))?;
+            }
+            registry
+                .parse(&text)
+                .with_context(|| format!("in {}", path.display()))?
         }
     };
-    if let Some(kind) = kind {
-        config.kind = kind;
-    }
     config.validate()?;
     config.fill_defaults();
     Ok(config)
+}
+
+/// The TOML document `text` with its matcher named `kind` instead (the axes it gave dropped).
+fn with_kind(text: &str, kind: &str) -> Result<String> {
+    let mut doc: toml::Table = toml::from_str(text)?;
+    if let Some(toml::Value::Table(m)) = doc.get_mut("matcher") {
+        for axis in ["algorithm", "reference", "index"] {
+            m.remove(axis);
+        }
+        m.insert("kind".into(), kind.into());
+    }
+    Ok(toml::to_string(&doc)?)
 }
 
 /// How far (s) a trajectory pose may lie from a relation's time and still stand for it.
@@ -65,7 +81,7 @@ const RELATIONS_MAX_DT: f64 = 0.1;
 
 /// Runs the command.
 pub fn run(args: MatchArgs) -> Result<()> {
-    let config = load_config(args.config.as_ref(), args.matcher)?;
+    let config = load_config(args.config.as_ref(), args.matcher.as_deref())?;
     if args.bridge.subscribe {
         return crate::bridge_cmd::run_subscribe(
             &config,
@@ -97,7 +113,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
     let mut matcher = MatchLoop::new(&config)?;
 
     // Scan by scan: memory holds the matcher's map and the reorder window, not the log.
-    let bar = progress_spinner(config.kind.name());
+    let bar = progress_spinner(&config.kind());
     for record in &mut reader {
         let record = record?;
         let (estimate, row) = matcher.push(&record);

@@ -278,7 +278,7 @@ impl MatchLoop {
     /// A fresh run of the matcher `config` describes.
     pub fn new(config: &MatcherConfig) -> Result<Self> {
         Ok(Self {
-            kind: config.kind.name().to_string(),
+            kind: config.kind(),
             odometry: config.build()?,
             totals: RunTotals::default(),
             busy: std::time::Duration::ZERO,
@@ -383,7 +383,7 @@ pub fn run_matcher(
 ) -> Result<MatchRun> {
     let mut matching = Matching::new(config)?;
     let bar = if show_progress {
-        progress_bar(records.len(), config.kind.name())
+        progress_bar(records.len(), &config.kind())
     } else {
         indicatif::ProgressBar::hidden()
     };

@@ -21,7 +21,7 @@ use crate::logs::tum::Stamped;
 use crate::matching::run_matcher;
 use anyhow::{Context, Result, bail};
 use qicp_core::{BeamGeometry, BeamStatus, Pose2, Record, Scan, ScanError};
-use qicp_matchers::{MatcherConfig, MatcherKind};
+use qicp_matchers::MatcherConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -62,7 +62,7 @@ pub struct SweepArgs {
     pub log: PathBuf,
     /// Matcher kind: idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm. Overrides the config's kind.
     #[arg(long)]
-    pub matcher: Option<MatcherKind>,
+    pub matcher: Option<String>,
     /// TOML file with a `[matcher]` table: the default configuration.
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -713,7 +713,7 @@ pub fn table(report: &SweepReport) -> String {
 /// Runs the command.
 pub fn run(args: SweepArgs) -> Result<()> {
     // Everything that can be refused is checked before the log is read and before matching.
-    let config = crate::match_cmd::load_config(args.config.as_ref(), args.matcher)?;
+    let config = crate::match_cmd::load_config(args.config.as_ref(), args.matcher.as_deref())?;
     let relations = read_relations(&args.relations)
         .with_context(|| format!("reading relations {}", args.relations.display()))?;
     let relations_name = args.relations.display().to_string();
@@ -737,7 +737,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         .map_or(1, NonZeroUsize::get);
     eprintln!(
         "sweeping {} on {} scans: default + {} variants, {jobs} at a time",
-        config.kind,
+        config.kind(),
         records.len(),
         variants.len()
     );
@@ -765,7 +765,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
     let median_ratio = median(&ratios.iter().map(|r| r.0).collect::<Vec<_>>());
     let report = SweepReport {
         log: args.log.display().to_string(),
-        matcher: config.kind.name().to_string(),
+        matcher: config.kind(),
         scans: records.len(),
         relations_total: relations.len(),
         relations_over_0_5_m: default.relations_over_0_5_m,
@@ -917,7 +917,7 @@ mod tests {
 
     #[test]
     fn variants_follow_the_steering_parameters() {
-        let config = MatcherConfig::defaults(MatcherKind::QWsm);
+        let config = MatcherConfig::defaults(qicp_matchers::MatcherKind::QWsm);
         let all = all_variants(&config);
         let parameters = config.steering_parameters();
         assert_eq!(all.len(), InputVariant::ALL.len() + 2 * parameters.len());

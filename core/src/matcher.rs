@@ -25,6 +25,13 @@ pub trait ScanMatcher {
         prior: Option<Matrix3<f64>>,
     ) -> MatchResult;
 
+    /// The spacing (m) below which a new map point adds nothing this matcher can use: the
+    /// default density bound of a map it matches against (`matcher.relevance.map_resolution`).
+    /// Default 0.02.
+    fn map_resolution(&self) -> f64 {
+        0.02
+    }
+
     /// The pose of `scan` in the frame of `reference`, starting from `guess`, trusting the
     /// scan alone.
     fn match_scan<I: SpatialIndex>(

@@ -1,26 +1,30 @@
-//! Matcher choice and parameters from TOML, and the registry that builds them.
+//! Matcher choice and parameters from TOML.
 //!
 //! ```toml
 //! [matcher]
-//! kind = "q-wsm"          # idc | wsm | q-idc | q-wsm | kd-idc | kd-wsm
-//! [matcher.icp]           # iteration (all kinds)
+//! kind = "q-wsm"          # a composed name: idc | wsm | q-idc | q-wsm | kd-idc | kd-wsm | …
+//! # or the three axes:  algorithm = "wsm", reference = "map" | "scan", index = "quadtree" | "kdtree" | …
+//! [matcher.icp]           # iteration (every algorithm)
 //! max_iterations = 40
-//! [matcher.wsm]           # wsm kinds only
+//! [matcher.wsm]           # the chosen algorithm's own section
 //! sigma_range = 0.01
 //! [matcher.relevance]     # which scans enter the reference (paper Alg. 1 thresholds)
 //! tau_max = 0.25
 //! ```
-//! Unknown keys, values out of range and sections the chosen kind does not use are refused
-//! with a message naming the key.
+//! Unknown keys, values out of range and sections of another algorithm are refused with a
+//! message naming the key. The names resolve through a [`Registry`].
 
 use crate::correlative::CorrelativeParams;
 use crate::icp::IcpParams;
-use crate::idc::{Idc, IdcParams};
-use crate::pipeline::{MotionModel, Odometry, Pipeline, Policy, Relevance};
+use crate::idc::Idc;
+use crate::params::to_table;
+use crate::pipeline::{MotionModel, Odometry, Pipeline, Relevance};
+use crate::registry::{Assembly, ErasedAlgorithm, IndexEntry, ReferenceKind, Registry};
 use crate::validation::ValidationParams;
-use crate::wsm::{Wsm, WsmParams};
+use crate::wsm::Wsm;
 use qicp_core::{KdTree, MutualNearest, QuadTree};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 use thiserror::Error;
 
 /// A configuration that cannot be used.
@@ -56,7 +60,8 @@ impl ConfigError {
     }
 }
 
-/// The registered matcher kinds.
+/// The six built-in presets: shorthands for an algorithm, a reference and an index (any
+/// algorithm registered later composes the same way; see [`Registry::resolve`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
 #[serde(rename_all = "kebab-case")]
 pub enum MatcherKind {
@@ -97,21 +102,6 @@ impl MatcherKind {
             MatcherKind::KdWsm => "kd-wsm",
         }
     }
-
-    /// True for the IDC family.
-    #[must_use]
-    pub fn is_idc(self) -> bool {
-        matches!(
-            self,
-            MatcherKind::Idc | MatcherKind::QIdc | MatcherKind::KdIdc
-        )
-    }
-
-    /// True for the kinds that match against a map.
-    #[must_use]
-    pub fn is_boosted(self) -> bool {
-        !matches!(self, MatcherKind::Idc | MatcherKind::Wsm)
-    }
 }
 
 impl std::fmt::Display for MatcherKind {
@@ -138,102 +128,269 @@ impl std::str::FromStr for MatcherKind {
     }
 }
 
-/// The `[matcher]` table.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The `[matcher]` table, resolved against a [`Registry`]: the algorithm and index it names
+/// are held here, so a config builds, prints and scales without the registry.
+#[derive(Clone)]
 pub struct MatcherConfig {
-    /// Which matcher.
-    pub kind: MatcherKind,
+    algorithm: Arc<dyn ErasedAlgorithm>,
+    /// Which scans the matcher is matched against.
+    pub reference: ReferenceKind,
+    index: IndexEntry,
     /// Iteration parameters.
-    #[serde(default)]
     pub icp: IcpParams,
-    /// IDC parameters (IDC kinds only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub idc: Option<IdcParams>,
-    /// WSM parameters (WSM kinds only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub wsm: Option<WsmParams>,
+    /// The algorithm's own section `[matcher.<algorithm>]`, effective (defaults filled in).
+    section: toml::Table,
     /// Which scans enter the reference.
-    #[serde(default)]
     pub relevance: Relevance,
     /// How far odometry is trusted (the prior of weighted matchers).
-    #[serde(default)]
     pub motion: MotionModel,
     /// How a match is checked before it enters the reference.
-    #[serde(default)]
     pub validation: ValidationParams,
     /// The correlative search that re-matches a suspect scan.
-    #[serde(default)]
     pub correlative: CorrelativeParams,
 }
 
+impl std::fmt::Debug for MatcherConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MatcherConfig")
+            .field("kind", &self.kind())
+            .field("icp", &self.icp)
+            .field(self.algorithm.name(), &self.section)
+            .field("relevance", &self.relevance)
+            .field("motion", &self.motion)
+            .field("validation", &self.validation)
+            .field("correlative", &self.correlative)
+            .finish()
+    }
+}
+
+impl PartialEq for MatcherConfig {
+    fn eq(&self, other: &Self) -> bool {
+        self.algorithm.name() == other.algorithm.name()
+            && self.reference == other.reference
+            && self.index.name() == other.index.name()
+            && self.icp == other.icp
+            && self.section == other.section
+            && self.relevance == other.relevance
+            && self.motion == other.motion
+            && self.validation == other.validation
+            && self.correlative == other.correlative
+    }
+}
+
+/// The sections every algorithm shares, with their keys below `[matcher]`.
+const COMMON_SECTIONS: [&str; 5] = ["icp", "relevance", "motion", "validation", "correlative"];
+
+fn section<T: serde::de::DeserializeOwned + Default>(
+    table: &mut toml::Table,
+    key: &str,
+) -> Result<T, ConfigError> {
+    match table.remove(key) {
+        None => Ok(T::default()),
+        Some(v) => v.try_into().map_err(|e: toml::de::Error| {
+            ConfigError::Parse(format!("matcher.{key}: {}", e.message().trim()))
+        }),
+    }
+}
+
+fn string_key(table: &mut toml::Table, key: &str) -> Result<Option<String>, ConfigError> {
+    match table.remove(key) {
+        None => Ok(None),
+        Some(toml::Value::String(s)) => Ok(Some(s)),
+        Some(v) => Err(ConfigError::invalid(
+            &format!("matcher.{key}"),
+            format!("must be a string, not {v}"),
+        )),
+    }
+}
+
 impl MatcherConfig {
-    /// The defaults of `kind`, every section it uses filled in.
+    /// The defaults of a built-in preset, every section filled in. Presets from other crates:
+    /// [`Registry::config`].
     #[must_use]
     pub fn defaults(kind: MatcherKind) -> Self {
-        let mut c = Self {
-            kind,
-            icp: IcpParams::default(),
-            idc: None,
-            wsm: None,
-            relevance: Relevance::default(),
-            motion: MotionModel::default(),
-            validation: ValidationParams::default(),
-            correlative: CorrelativeParams::default(),
-        };
-        c.fill_defaults();
-        c
+        Registry::builtin()
+            .config(kind.name())
+            .expect("every built-in preset resolves with valid defaults")
     }
 
-    /// Parses the `[matcher]` table of a TOML document and validates it.
+    /// Parses the `[matcher]` table of a TOML document against the built-in registry
+    /// ([`Registry::parse`] for others) and validates it.
     pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
-        #[derive(Deserialize)]
-        #[serde(deny_unknown_fields)]
-        struct File {
-            matcher: MatcherConfig,
+        Registry::builtin().parse(text)
+    }
+
+    pub(crate) fn from_axes(
+        registry: &Registry,
+        algorithm: &str,
+        reference: ReferenceKind,
+        index: &str,
+    ) -> Result<Self, ConfigError> {
+        Self::assemble(
+            registry.algorithm(algorithm)?,
+            reference,
+            registry.index(index)?,
+            toml::Table::new(),
+            &|name| registry.is_algorithm(name),
+        )
+    }
+
+    pub(crate) fn parse_with(registry: &Registry, text: &str) -> Result<Self, ConfigError> {
+        let mut file: toml::Table =
+            toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
+        let Some(matcher) = file.remove("matcher") else {
+            return Err(ConfigError::Parse(match file.keys().next() {
+                Some(k) => format!("unknown table `{k}`: the matcher is configured in `[matcher]`"),
+                None => "no `[matcher]` table".into(),
+            }));
+        };
+        if let Some(k) = file.keys().next() {
+            return Err(ConfigError::Parse(format!(
+                "unknown table `{k}`: the matcher is configured in `[matcher]`"
+            )));
         }
-        let file: File = toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
-        let mut c = file.matcher;
+        let toml::Value::Table(mut table) = matcher else {
+            return Err(ConfigError::Parse("`matcher` must be a table".into()));
+        };
+        let kind = string_key(&mut table, "kind")?;
+        let algorithm = string_key(&mut table, "algorithm")?;
+        let reference = string_key(&mut table, "reference")?;
+        let index = string_key(&mut table, "index")?;
+        let (algorithm, reference, index) = match (kind, algorithm) {
+            (Some(_), Some(_)) => {
+                return Err(ConfigError::invalid(
+                    "matcher.kind",
+                    "give `kind` (a composed name such as \"q-wsm\") or `algorithm` with \
+                     `reference` and `index`, not both",
+                ));
+            }
+            (Some(kind), None) => {
+                if reference.is_some() || index.is_some() {
+                    return Err(ConfigError::invalid(
+                        "matcher.kind",
+                        "`kind` names the reference and index already; leave out `reference` and `index`",
+                    ));
+                }
+                let (a, r, i) = registry.resolve(&kind)?;
+                (a.to_string(), r, i.to_string())
+            }
+            (None, Some(a)) => (
+                a,
+                ReferenceKind::from_name(reference.as_deref().unwrap_or("map"))?,
+                index.unwrap_or_else(|| "quadtree".into()),
+            ),
+            (None, None) => {
+                return Err(ConfigError::invalid(
+                    "matcher.kind",
+                    format!(
+                        "missing: give `kind` (one of {}) or `algorithm`",
+                        registry.names().join(", ")
+                    ),
+                ));
+            }
+        };
+        let algorithm = registry.algorithm(&algorithm)?;
+        let index = registry.index(&index)?;
+        Self::assemble(algorithm, reference, index, table, &|name| {
+            registry.is_algorithm(name)
+        })
+    }
+
+    /// Builds a config from the keys of `[matcher]` left after the axes; refuses leftovers.
+    fn assemble(
+        algorithm: Arc<dyn ErasedAlgorithm>,
+        reference: ReferenceKind,
+        index: IndexEntry,
+        mut table: toml::Table,
+        is_algorithm: &dyn Fn(&str) -> bool,
+    ) -> Result<Self, ConfigError> {
+        let own = match table.remove(algorithm.name()) {
+            None => toml::Table::new(),
+            Some(toml::Value::Table(t)) => t,
+            Some(v) => {
+                return Err(ConfigError::invalid(
+                    &format!("matcher.{}", algorithm.name()),
+                    format!("must be a table, not {v}"),
+                ));
+            }
+        };
+        let mut c = Self {
+            reference,
+            icp: section(&mut table, "icp")?,
+            relevance: section(&mut table, "relevance")?,
+            motion: section(&mut table, "motion")?,
+            validation: section(&mut table, "validation")?,
+            correlative: section(&mut table, "correlative")?,
+            section: algorithm.effective(&own)?,
+            algorithm,
+            index,
+        };
+        if let Some(key) = table.keys().next() {
+            return Err(if is_algorithm(key) {
+                ConfigError::Unused {
+                    key: format!("matcher.{key}"),
+                    kind: c.kind(),
+                }
+            } else {
+                ConfigError::Parse(format!(
+                    "unknown field `{key}` in `[matcher]`; expected kind, algorithm, reference, \
+                     index, {}, {}",
+                    COMMON_SECTIONS.join(", "),
+                    c.algorithm.name()
+                ))
+            });
+        }
         c.validate()?;
         c.fill_defaults();
         Ok(c)
     }
 
-    /// Fills every section the kind uses with defaults where absent: the effective config.
+    /// The composed name, e.g. `"q-wsm"` (see [`Registry::compose`]).
+    #[must_use]
+    pub fn kind(&self) -> String {
+        Registry::compose(self.algorithm.name(), self.reference, &self.index)
+    }
+
+    /// The algorithm's registry name, e.g. `"wsm"`.
+    #[must_use]
+    pub fn algorithm(&self) -> &'static str {
+        self.algorithm.name()
+    }
+
+    /// The index's registry name, e.g. `"quadtree"`.
+    #[must_use]
+    pub fn index(&self) -> &'static str {
+        self.index.name()
+    }
+
+    /// This config with its reference policy set to `reference` (all else kept): the
+    /// scan-to-scan twin of a boosted matcher and back.
+    #[must_use]
+    pub fn with_reference(&self, reference: ReferenceKind) -> Self {
+        let mut c = self.clone();
+        c.reference = reference;
+        c
+    }
+
+    /// The algorithm's parameters as their type, e.g. `config.params::<WsmParams>()`.
+    pub fn params<P: serde::de::DeserializeOwned>(&self) -> Result<P, ConfigError> {
+        toml::Value::Table(self.section.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))
+    }
+
+    /// Fills every section with defaults where absent: the effective config.
     pub fn fill_defaults(&mut self) {
-        // WSM: the laser's range noise, below which a new point adds no geometry.
-        let resolution = if self.kind.is_idc() {
-            0.02
-        } else {
-            self.wsm
-                .map_or(WsmParams::default().sigma_range, |w| w.sigma_range)
-        };
-        self.relevance.map_resolution.get_or_insert(resolution);
-        if self.kind.is_idc() {
-            self.idc.get_or_insert_with(IdcParams::default);
-        } else {
-            self.wsm.get_or_insert_with(WsmParams::default);
+        if self.relevance.map_resolution.is_none() {
+            let resolution = self.algorithm.map_resolution(&self.section).unwrap_or(0.02);
+            self.relevance.map_resolution = Some(resolution);
         }
     }
 
-    /// Checks values and refuses sections the kind does not use.
+    /// Checks every value.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let unused = |key: &str| ConfigError::Unused {
-            key: key.into(),
-            kind: self.kind.name().into(),
-        };
         self.icp.validate()?;
-        match (self.kind.is_idc(), &self.idc, &self.wsm) {
-            (true, _, Some(_)) => return Err(unused("matcher.wsm")),
-            (false, Some(_), _) => return Err(unused("matcher.idc")),
-            _ => {}
-        }
-        if let Some(p) = &self.idc {
-            p.validate()?;
-        }
-        if let Some(p) = &self.wsm {
-            p.validate()?;
-        }
+        self.algorithm.effective(&self.section)?;
         self.relevance.validate()?;
         self.motion.validate()?;
         self.validation.validate()?;
@@ -241,16 +398,43 @@ impl MatcherConfig {
         Ok(())
     }
 
-    /// The effective config as TOML (every used section, defaults filled in).
-    #[must_use]
-    pub fn to_toml(&self) -> String {
-        #[derive(Serialize)]
-        struct File<'a> {
-            matcher: &'a MatcherConfig,
-        }
+    /// The effective `[matcher]` table: the axes (`algorithm`, `reference`, `index`) and every
+    /// section, defaults filled in.
+    pub fn to_table(&self) -> Result<toml::Table, ConfigError> {
         let mut c = self.clone();
         c.fill_defaults();
-        toml::to_string_pretty(&File { matcher: &c }).unwrap_or_default()
+        let mut m = toml::Table::new();
+        let mut put =
+            |key: &str, value: Result<toml::Table, ConfigError>| -> Result<(), ConfigError> {
+                m.insert(key.into(), toml::Value::Table(value?));
+                Ok(())
+            };
+        put("icp", to_table(&c.icp))?;
+        put(c.algorithm.name(), Ok(c.section.clone()))?;
+        put("relevance", to_table(&c.relevance))?;
+        put("motion", to_table(&c.motion))?;
+        put("validation", to_table(&c.validation))?;
+        put("correlative", to_table(&c.correlative))?;
+        m.insert("algorithm".into(), c.algorithm.name().into());
+        m.insert("reference".into(), c.reference.name().into());
+        m.insert("index".into(), c.index.name().into());
+        Ok(m)
+    }
+
+    /// The effective config as TOML (every section, defaults filled in), with the composed
+    /// name in a comment.
+    #[must_use]
+    pub fn to_toml(&self) -> String {
+        let Ok(m) = self.to_table() else {
+            return String::new();
+        };
+        let mut file = toml::Table::new();
+        file.insert("matcher".into(), toml::Value::Table(m));
+        format!(
+            "# kind = \"{}\"\n{}",
+            self.kind(),
+            toml::to_string_pretty(&file).unwrap_or_default()
+        )
     }
 
     /// Builds the pipeline this config describes.
@@ -258,74 +442,20 @@ impl MatcherConfig {
         self.validate()?;
         let mut c = self.clone();
         c.fill_defaults();
-        let icp = c.icp;
-        let idc = c.idc.unwrap_or_default();
-        let wsm = c.wsm.unwrap_or_default();
-        let boosted = Policy::Boosted(c.relevance);
-        let incremental = Policy::Incremental(c.relevance);
-        let noise = wsm.noise();
-        let name = c.kind.name();
-        // What goes around the matcher: the odometry prior and the checks before insertion.
-        let around = (c.motion, c.validation, c.correlative);
-        // One line per kind: the matcher, its reference index and its policy.
-        fn boxed<M, I>(
-            p: Pipeline<M, I>,
-            (motion, validation, correlative): (MotionModel, ValidationParams, CorrelativeParams),
-        ) -> Box<dyn Odometry>
-        where
-            Pipeline<M, I>: Odometry + 'static,
-            M: qicp_core::ScanMatcher,
-            I: qicp_core::SpatialIndex,
-        {
-            Box::new(
-                p.with_motion_model(motion)
-                    .with_validation(validation, correlative),
-            )
-        }
-        Ok(match c.kind {
-            MatcherKind::Idc => {
-                let m = Idc::<MutualNearest<QuadTree>>::new(icp, idc);
-                boxed(
-                    Pipeline::new(name, m, QuadTree::default(), incremental, noise),
-                    around,
-                )
-            }
-            MatcherKind::Wsm => {
-                let m = Wsm::<MutualNearest<QuadTree>>::new(icp, wsm);
-                boxed(
-                    Pipeline::new(name, m, QuadTree::default(), incremental, noise),
-                    around,
-                )
-            }
-            MatcherKind::QIdc => boxed(
-                QIdc::new(
-                    name,
-                    Idc::new(icp, idc),
-                    QuadTree::default(),
-                    boosted,
-                    noise,
-                ),
-                around,
-            ),
-            MatcherKind::QWsm => boxed(
-                QWsm::new(
-                    name,
-                    Wsm::new(icp, wsm),
-                    QuadTree::default(),
-                    boosted,
-                    noise,
-                ),
-                around,
-            ),
-            MatcherKind::KdIdc => boxed(
-                KdIdc::new(name, Idc::new(icp, idc), KdTree::default(), boosted, noise),
-                around,
-            ),
-            MatcherKind::KdWsm => boxed(
-                KdWsm::new(name, Wsm::new(icp, wsm), KdTree::default(), boosted, noise),
-                around,
-            ),
-        })
+        let kind = c.kind();
+        let policy = c.reference.policy(c.relevance);
+        c.algorithm.build(
+            &c.section,
+            Assembly {
+                kind,
+                icp: c.icp,
+                policy,
+                motion: c.motion,
+                validation: c.validation,
+                correlative: c.correlative,
+                index: &c.index,
+            },
+        )
     }
 }
 
@@ -338,8 +468,9 @@ pub type KdIdc = Pipeline<Idc<MutualNearest<KdTree>>, KdTree>;
 /// KD-WSM: WSM against a kd-tree map.
 pub type KdWsm = Pipeline<Wsm<MutualNearest<KdTree>>, KdTree>;
 
-/// The numeric parameters that steer matching and map building, by kind family: the ones a
-/// robustness sweep perturbs (`qicp sweep`). Keys are dotted paths below `[matcher]`.
+/// The numeric parameters of the shared sections that steer matching and map building: the
+/// ones a robustness sweep perturbs (`qicp sweep`), with each algorithm's own steering
+/// parameters ([`Param::steering`]). Keys are dotted paths below `[matcher]`.
 const STEERING_COMMON: &[&str] = &[
     "icp.max_dist_start",
     "icp.max_dist_end",
@@ -356,47 +487,37 @@ const STEERING_COMMON: &[&str] = &[
     "correlative.window_xy",
     "correlative.window_deg",
 ];
-const STEERING_WSM: &[&str] = &["wsm.sigma_range", "wsm.sigma_slide"];
-const STEERING_IDC: &[&str] = &[
-    "idc.window_start_deg",
-    "idc.window_sigmas",
-    "idc.gate_sigmas",
-];
 
 impl MatcherConfig {
-    /// The numeric parameters that steer this kind's matching and map building (correspondence
-    /// distances, relevance thresholds, the map's density bound, the noise and motion models),
-    /// as dotted keys such as `"matcher.icp.max_dist_start"`. Parameters whose value is 0 are
-    /// left out: scaling them changes nothing.
+    /// The numeric parameters that steer this matcher (correspondence distances, relevance
+    /// thresholds, the map's density bound, the noise and motion models, and the algorithm's
+    /// own steering parameters), as dotted keys such as `"matcher.icp.max_dist_start"`.
+    /// Parameters whose value is 0 are left out: scaling them changes nothing.
     #[must_use]
     pub fn steering_parameters(&self) -> Vec<String> {
-        let family = if self.kind.is_idc() {
-            STEERING_IDC
-        } else {
-            STEERING_WSM
-        };
-        let Ok(value) = self.effective_value() else {
+        let Ok(value) = self.to_table() else {
             return Vec::new();
         };
+        let own = self
+            .algorithm
+            .parameters()
+            .iter()
+            .filter(|p| p.steering)
+            .map(|p| format!("{}.{}", self.algorithm.name(), p.key));
         STEERING_COMMON
             .iter()
-            .chain(family)
+            .map(|k| k.to_string())
+            .chain(own)
             .map(|k| format!("matcher.{k}"))
             .filter(|k| lookup(&value, k).is_some_and(|v| v != 0.0))
             .collect()
-    }
-
-    fn effective_value(&self) -> Result<toml::Value, ConfigError> {
-        let mut c = self.clone();
-        c.fill_defaults();
-        toml::Value::try_from(&c).map_err(|e| ConfigError::Parse(e.to_string()))
     }
 
     /// The value of a numeric parameter given as a dotted key (`"matcher.wsm.sigma_slide"`),
     /// defaults filled in; `None` if the key names no number.
     #[must_use]
     pub fn parameter(&self, key: &str) -> Option<f64> {
-        lookup(&self.effective_value().ok()?, key)
+        lookup(&self.to_table().ok()?, key)
     }
 
     /// This config with the numeric parameter `key` (a dotted key, as
@@ -404,9 +525,11 @@ impl MatcherConfig {
     /// validated. Integers are rounded to the nearest whole number.
     pub fn scaled(&self, key: &str, factor: f64) -> Result<Self, ConfigError> {
         let unknown = || ConfigError::invalid(key, "is not a numeric matcher parameter");
-        let mut value = self.effective_value()?;
-        let mut at = &mut value;
-        for part in key.strip_prefix("matcher.").ok_or_else(unknown)?.split('.') {
+        let mut table = self.to_table()?;
+        let mut parts = key.strip_prefix("matcher.").ok_or_else(unknown)?.split('.');
+        let first = parts.next().ok_or_else(unknown)?;
+        let mut at = table.get_mut(first).ok_or_else(unknown)?;
+        for part in parts {
             at = at.get_mut(part).ok_or_else(unknown)?;
         }
         *at = match *at {
@@ -414,18 +537,25 @@ impl MatcherConfig {
             toml::Value::Integer(v) => toml::Value::Integer((v as f64 * factor).round() as i64),
             _ => return Err(unknown()),
         };
-        let c: MatcherConfig = value
-            .try_into()
-            .map_err(|e: toml::de::Error| ConfigError::Parse(e.to_string()))?;
-        c.validate()?;
-        Ok(c)
+        for axis in ["algorithm", "reference", "index"] {
+            table.remove(axis);
+        }
+        // Leftover keys cannot appear: the table is this config's own.
+        Self::assemble(
+            self.algorithm.clone(),
+            self.reference,
+            self.index.clone(),
+            table,
+            &|_| false,
+        )
     }
 }
 
-/// The number at a dotted key (`"matcher.wsm.sigma_slide"`) of an effective config's TOML.
-fn lookup(value: &toml::Value, key: &str) -> Option<f64> {
-    let mut at = value;
-    for part in key.strip_prefix("matcher.")?.split('.') {
+/// The number at a dotted key (`"matcher.wsm.sigma_slide"`) of an effective config's table.
+fn lookup(table: &toml::Table, key: &str) -> Option<f64> {
+    let mut parts = key.strip_prefix("matcher.")?.split('.');
+    let mut at = table.get(parts.next()?)?;
+    for part in parts {
         at = at.get(part)?;
     }
     match at {

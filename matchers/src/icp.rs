@@ -184,13 +184,13 @@ impl IcpParams {
 }
 
 /// Moves the scan points into the reference frame.
-pub(crate) fn move_points(pose: &Pose2, local: &[Point2<f64>], out: &mut Vec<Point2<f64>>) {
+pub fn move_points(pose: &Pose2, local: &[Point2<f64>], out: &mut Vec<Point2<f64>>) {
     out.clear();
     out.extend(local.iter().map(|p| pose.transform_point(p)));
 }
 
 /// Drops pairs farther apart than `factor` × the median distance, keeping all within `floor`.
-pub(crate) fn trim(pairs: &mut Vec<Pair>, factor: f64, floor: f64, scratch: &mut Vec<f64>) {
+pub fn trim(pairs: &mut Vec<Pair>, factor: f64, floor: f64, scratch: &mut Vec<f64>) {
     if factor == 0.0 || pairs.len() < 4 {
         return;
     }
@@ -203,7 +203,7 @@ pub(crate) fn trim(pairs: &mut Vec<Pair>, factor: f64, floor: f64, scratch: &mut
 }
 
 /// Residual correlation distance: mean distance of the pairs under `pose` (m).
-pub(crate) fn residual<I: SpatialIndex>(
+pub fn residual<I: SpatialIndex>(
     reference: &Reference<I>,
     local: &[Point2<f64>],
     pairs: &[Pair],

@@ -1,8 +1,10 @@
 //! Iterative Dual Correspondence (Lu & Milios 1997).
 
 use crate::ConfigError;
-use crate::icp::{IcpParams, Schedule, move_points, non_negative, positive, residual, trim};
+use crate::icp::{IcpParams, Schedule, move_points, residual, trim};
 use crate::lsq::{NormalEquations, align_points};
+use crate::params::{Param, Range, check_section};
+use crate::registry::{Algorithm, Metric};
 use qicp_core::{
     ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix2, Matrix3,
     Pair, Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex,
@@ -64,30 +66,78 @@ impl Default for IdcParams {
     }
 }
 
-impl IdcParams {
-    /// Checks every value; the error names the key.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        positive("matcher.idc.window_start_deg", self.window_start_deg)?;
-        positive("matcher.idc.window_end_deg", self.window_end_deg)?;
-        if self.window_start_deg > 90.0 || self.window_end_deg > self.window_start_deg {
+/// IDC in the registry (`algorithm = "idc"`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct IdcAlgorithm;
+
+impl Algorithm for IdcAlgorithm {
+    const NAME: &'static str = "idc";
+    const SUMMARY: &'static str = "Iterative Dual Correspondence (Lu & Milios 1997)";
+    const PARAMETERS: &'static [Param] = &[
+        Param::steering(
+            "window_start_deg",
+            Range::Positive,
+            "half-width of the matching-range window in the first iteration (deg)",
+        ),
+        Param::new(
+            "window_end_deg",
+            Range::Positive,
+            "… shrinking down to this (deg)",
+        ),
+        Param::steering(
+            "window_sigmas",
+            Range::NonNegative,
+            "with a prior, the first window in its rotation σ (0: window_start_deg)",
+        ),
+        Param::steering(
+            "gate_sigmas",
+            Range::NonNegative,
+            "with a prior, the first gate holds this many translation σ (0: max_dist_start)",
+        ),
+        Param::new(
+            "stage_tolerance",
+            Range::Open(0.0, 1.0),
+            "a wide stage ends when a step is below this fraction of gate and window",
+        ),
+        Param::new(
+            "settle_translation",
+            Range::NonNegative,
+            "the last stage settles below this step (m)",
+        ),
+        Param::new(
+            "settle_rotation_deg",
+            Range::NonNegative,
+            "… and below this turn (deg)",
+        ),
+        Param::new(
+            "verify",
+            Range::Flag,
+            "check the guess against the scan and keep whichever explains it best",
+        ),
+    ];
+    type Params = IdcParams;
+    type Matcher<C: Metric> = Idc<C>;
+
+    fn matcher<C: Metric>(icp: IcpParams, params: &IdcParams) -> Idc<C> {
+        Idc::new(icp, *params)
+    }
+
+    fn check(params: &IdcParams) -> Result<(), ConfigError> {
+        if params.window_start_deg > 90.0 || params.window_end_deg > params.window_start_deg {
             return Err(ConfigError::invalid(
                 "matcher.idc.window_end_deg",
                 "windows must satisfy 0 < window_end_deg ≤ window_start_deg ≤ 90",
             ));
         }
-        non_negative("matcher.idc.window_sigmas", self.window_sigmas)?;
-        non_negative("matcher.idc.gate_sigmas", self.gate_sigmas)?;
-        if !(self.stage_tolerance.is_finite()
-            && self.stage_tolerance > 0.0
-            && self.stage_tolerance < 1.0)
-        {
-            return Err(ConfigError::invalid(
-                "matcher.idc.stage_tolerance",
-                format!("{} must be in (0, 1)", self.stage_tolerance),
-            ));
-        }
-        non_negative("matcher.idc.settle_translation", self.settle_translation)?;
-        non_negative("matcher.idc.settle_rotation_deg", self.settle_rotation_deg)
+        Ok(())
+    }
+}
+
+impl IdcParams {
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check_section("matcher.idc", self, IdcAlgorithm::PARAMETERS)?;
+        IdcAlgorithm::check(self)
     }
 
     /// The first window (deg): `window_sigmas` standard deviations of the prior's rotation

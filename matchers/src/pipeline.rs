@@ -26,9 +26,10 @@ pub struct Relevance {
     /// Boosted maps skip a new point closer than this to one they hold (m): the bound on the
     /// map's density, so that memory and per-scan time grow with the area explored, not with
     /// time. 0 inserts every point, as Alg. 1 reads (693k points on the Intel log).
-    /// Default: for WSM kinds the laser's range noise `matcher.wsm.sigma_range` (0.01), below
-    /// which a new point adds no geometry; 0.02 for IDC kinds, whose range rule's radius
-    /// queries grow with the map's density (40 ms/scan on a corridor map without it).
+    /// Default (`None`): the matcher's own [`ScanMatcher::map_resolution`], in typed and
+    /// TOML-built pipelines alike: for WSM the laser's range noise `matcher.wsm.sigma_range`
+    /// (0.01), below which a new point adds no geometry; 0.02 for IDC, whose range rule's
+    /// radius queries grow with the map's density (40 ms/scan on a corridor map without it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub map_resolution: Option<f64>,
     /// A relevant scan enters a boosted map only when at least this share of its points lies
@@ -192,7 +193,7 @@ pub struct Estimate {
 /// Object-safe: the TOML registry hands these out as `Box<dyn Odometry>`.
 pub trait Odometry: Send + std::fmt::Debug {
     /// The registry name, e.g. `"q-wsm"`.
-    fn kind(&self) -> &'static str;
+    fn kind(&self) -> &str;
     /// Matches one record and updates the reference.
     fn process(&mut self, record: &Record) -> Estimate;
     /// Points held in the reference (the whole map for boosted pipelines).
@@ -211,7 +212,7 @@ pub enum Policy {
 /// A matcher `M` with a reference held in index `I`.
 #[derive(Debug)]
 pub struct Pipeline<M, I> {
-    kind: &'static str,
+    kind: String,
     matcher: M,
     reference: Reference<I>,
     policy: Policy,
@@ -230,24 +231,25 @@ pub struct Pipeline<M, I> {
 }
 
 impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
-    /// A pipeline named `kind` (for reports).
+    /// A pipeline named `kind` (for reports), with the defaults of the TOML registry: the
+    /// odometry prior of [`MotionModel::default`], the checks of
+    /// [`ValidationParams::default`] and [`CorrelativeParams::default`], and the matcher's own
+    /// map resolution where `policy` leaves it unset. `Pipeline::new(..)` with default
+    /// parameters and `Registry::config(name)?.build()` give the same poses.
     pub fn new(
-        kind: &'static str,
+        kind: impl Into<String>,
         matcher: M,
         index: I,
         policy: Policy,
         noise: LaserNoise,
     ) -> Self {
         Self {
-            kind,
+            kind: kind.into(),
             matcher,
             reference: Reference::new(index),
             policy,
             noise,
-            motion: MotionModel {
-                enabled: false,
-                ..MotionModel::default()
-            },
+            motion: MotionModel::default(),
             reference_frame: Pose2::IDENTITY,
             last: None,
             last_inserted: None,
@@ -386,7 +388,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                         &record.scan,
                         laser,
                         &self.noise,
-                        Some(relevance.map_resolution.unwrap_or(0.0)),
+                        Some(
+                            relevance
+                                .map_resolution
+                                .unwrap_or_else(|| self.matcher.map_resolution()),
+                        ),
                     )
                     .is_ok()
             }
@@ -403,8 +409,8 @@ where
     M: ScanMatcher + Send + std::fmt::Debug,
     I: SpatialIndex + Send + std::fmt::Debug,
 {
-    fn kind(&self) -> &'static str {
-        self.kind
+    fn kind(&self) -> &str {
+        &self.kind
     }
 
     fn process(&mut self, record: &Record) -> Estimate {

@@ -1,8 +1,10 @@
 //! Weighted Scan Matching (Pfister, Kriechbaum, Roumeliotis, Burdick 2002).
 
 use crate::ConfigError;
-use crate::icp::{IcpParams, move_points, positive, residual, trim};
+use crate::icp::{IcpParams, move_points, residual, trim};
 use crate::lsq::{NormalEquations, apply_step};
+use crate::params::{Param, Range, check_section};
+use crate::registry::{Algorithm, Metric};
 use qicp_core::{
     ClosestPoint, CorrespondenceMetric, Fallback, LaserNoise, MatchResult, Matrix2, Matrix3, Pair,
     Point2, PointInfo, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex, Vector2,
@@ -43,28 +45,56 @@ impl Default for WsmParams {
     }
 }
 
+/// WSM in the registry (`algorithm = "wsm"`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct WsmAlgorithm;
+
+impl Algorithm for WsmAlgorithm {
+    const NAME: &'static str = "wsm";
+    const SUMMARY: &'static str = "Weighted Scan Matching (Pfister et al. 2002)";
+    const PARAMETERS: &'static [Param] = &[
+        Param::steering(
+            "sigma_range",
+            Range::Positive,
+            "range noise σr along the beam (m)",
+        ),
+        Param::new(
+            "sigma_bearing",
+            Range::Positive,
+            "bearing noise σφ across the beam (rad)",
+        ),
+        Param::new(
+            "correspondence_scale",
+            Range::Positive,
+            "scale of the sampling part of the correspondence error",
+        ),
+        Param::steering(
+            "sigma_slide",
+            Range::NonNegative,
+            "how far along a straight surface the true correspondent may lie (m)",
+        ),
+        Param::new(
+            "normal_fraction",
+            Range::Closed(0.0, 1.0),
+            "share of the along-surface variance also assigned across it",
+        ),
+    ];
+    type Params = WsmParams;
+    type Matcher<C: Metric> = Wsm<C>;
+
+    fn matcher<C: Metric>(icp: IcpParams, params: &WsmParams) -> Wsm<C> {
+        Wsm::new(icp, *params)
+    }
+
+    fn noise(params: &WsmParams) -> LaserNoise {
+        params.noise()
+    }
+}
+
 impl WsmParams {
-    /// Checks every value; the error names the key.
+    /// Checks every value against its declared range; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        positive("matcher.wsm.sigma_range", self.sigma_range)?;
-        positive("matcher.wsm.sigma_bearing", self.sigma_bearing)?;
-        positive(
-            "matcher.wsm.correspondence_scale",
-            self.correspondence_scale,
-        )?;
-        if !(self.sigma_slide.is_finite() && self.sigma_slide >= 0.0) {
-            return Err(ConfigError::invalid(
-                "matcher.wsm.sigma_slide",
-                format!("{} must be finite and ≥ 0", self.sigma_slide),
-            ));
-        }
-        if !(self.normal_fraction.is_finite() && (0.0..=1.0).contains(&self.normal_fraction)) {
-            return Err(ConfigError::invalid(
-                "matcher.wsm.normal_fraction",
-                format!("{} must be in [0, 1]", self.normal_fraction),
-            ));
-        }
-        Ok(())
+        check_section("matcher.wsm", self, WsmAlgorithm::PARAMETERS)
     }
 
     /// The laser noise model these parameters describe.
@@ -98,7 +128,7 @@ impl WsmParams {
 }
 
 /// Adds the guess as a Gaussian prior: cost (guess − pose)ᵀ Λ (guess − pose).
-pub(crate) fn add_prior(
+pub fn add_prior(
     ne: &mut NormalEquations,
     prior: Option<&Matrix3<f64>>,
     guess: &Pose2,
@@ -182,6 +212,11 @@ impl<C: CorrespondenceMetric> Wsm<C> {
 impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
     fn name(&self) -> &'static str {
         "wsm"
+    }
+
+    /// The laser's range noise, below which a new point adds no geometry.
+    fn map_resolution(&self) -> f64 {
+        self.params.sigma_range
     }
 
     fn match_with_prior<I: SpatialIndex>(

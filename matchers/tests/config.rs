@@ -1,7 +1,7 @@
 //! The TOML registry: every kind builds from its defaults, effective configs round-trip, and
 //! bad input is refused with a message that names the key.
 
-use qicp_matchers::{ConfigError, MatcherConfig, MatcherKind};
+use qicp_matchers::{ConfigError, MatcherConfig, MatcherKind, Registry, WsmParams};
 
 fn err(text: &str) -> String {
     MatcherConfig::from_toml(text)
@@ -26,9 +26,9 @@ fn kind_and_parameters_from_toml() {
         "[matcher]\nkind = \"q-wsm\"\n[matcher.icp]\nmax_iterations = 7\n[matcher.wsm]\nsigma_range = 0.02\n[matcher.relevance]\ntau_max = 0.5\n",
     )
     .unwrap();
-    assert_eq!(c.kind, MatcherKind::QWsm);
+    assert_eq!(c.kind(), MatcherKind::QWsm.name());
     assert_eq!(c.icp.max_iterations, 7);
-    assert_eq!(c.wsm.unwrap().sigma_range, 0.02);
+    assert_eq!(c.params::<WsmParams>().unwrap().sigma_range, 0.02);
     assert_eq!(c.relevance.tau_max, 0.5);
 }
 
@@ -166,4 +166,203 @@ fn steering_parameters_scale_one_at_a_time() {
         .scaled("matcher.icp.nope", 2.0)
         .unwrap_err();
     assert!(err.to_string().contains("matcher.icp.nope"));
+}
+
+/// The axes compose to the presets: `kind = "q-wsm"` and `algorithm = "wsm"` (with the
+/// default reference and index) are one config, and so are the other five.
+#[test]
+fn presets_are_compositions_of_the_axes() {
+    for (kind, algorithm, reference, index) in [
+        ("idc", "idc", "scan", "quadtree"),
+        ("wsm", "wsm", "scan", "quadtree"),
+        ("q-idc", "idc", "map", "quadtree"),
+        ("q-wsm", "wsm", "map", "quadtree"),
+        ("kd-idc", "idc", "map", "kdtree"),
+        ("kd-wsm", "wsm", "map", "kdtree"),
+    ] {
+        let preset = MatcherConfig::from_toml(&format!("[matcher]\nkind = \"{kind}\"\n")).unwrap();
+        let axes = MatcherConfig::from_toml(&format!(
+            "[matcher]\nalgorithm = \"{algorithm}\"\nreference = \"{reference}\"\nindex = \"{index}\"\n"
+        ))
+        .unwrap();
+        assert_eq!(preset, axes, "{kind}");
+        assert_eq!(axes.kind(), kind);
+    }
+    let short = MatcherConfig::from_toml("[matcher]\nalgorithm = \"wsm\"\n").unwrap();
+    assert_eq!(
+        short.kind(),
+        "q-wsm",
+        "the map and the quad tree are the defaults"
+    );
+}
+
+#[test]
+fn axes_that_do_not_resolve_are_refused_by_name() {
+    let e = err("[matcher]\nalgorithm = \"plicp\"\n");
+    assert!(
+        e.contains("matcher.algorithm") && e.contains("plicp"),
+        "{e}"
+    );
+    let e = err("[matcher]\nalgorithm = \"wsm\"\nindex = \"octree\"\n");
+    assert!(e.contains("matcher.index") && e.contains("kdtree"), "{e}");
+    let e = err("[matcher]\nalgorithm = \"wsm\"\nreference = \"graph\"\n");
+    assert!(e.contains("matcher.reference"), "{e}");
+    let e = err("[matcher]\nkind = \"q-wsm\"\nalgorithm = \"wsm\"\n");
+    assert!(e.contains("not both"), "{e}");
+    let e = err("[matcher]\nkind = \"q-wsm\"\nindex = \"kdtree\"\n");
+    assert!(e.contains("matcher.kind"), "{e}");
+    let e = err("[matcher]\n");
+    assert!(e.contains("q-wsm"), "a missing kind lists the names: {e}");
+}
+
+/// Every registered index composes with every algorithm: the brute-force oracle, registered
+/// through the run-time path ([`qicp_matchers::AnyIndex`]), is `bf-wsm`.
+#[test]
+fn every_algorithm_composes_with_every_index() {
+    let registry = Registry::builtin();
+    let names = registry.names();
+    for name in [
+        "idc", "wsm", "q-idc", "q-wsm", "kd-idc", "kd-wsm", "bf-idc", "bf-wsm",
+    ] {
+        assert!(names.iter().any(|n| n == name), "{name} in {names:?}");
+        let config = registry.config(name).unwrap();
+        assert_eq!(config.build().unwrap().kind(), name);
+    }
+}
+
+/// The declared ranges are what the checks enforce: each parameter's description names the
+/// range the error message gives.
+#[test]
+fn declared_parameters_are_checked_generically() {
+    let registry = Registry::builtin();
+    for algorithm in registry.algorithm_names() {
+        let (_, params) = registry.parameters(algorithm).unwrap();
+        assert!(!params.is_empty());
+        for p in params {
+            let bad = match p.range {
+                qicp_matchers::Range::Flag => continue,
+                qicp_matchers::Range::Closed(lo, _) | qicp_matchers::Range::Open(lo, _) => lo - 1.0,
+                _ => -1.0,
+            };
+            let text = format!(
+                "[matcher]\nalgorithm = \"{algorithm}\"\n[matcher.{algorithm}]\n{} = {bad:?}\n",
+                p.key
+            );
+            let e = err(&text);
+            assert!(e.contains(&format!("matcher.{algorithm}.{}", p.key)), "{e}");
+        }
+    }
+}
+
+/// One set of defaults: each preset built with the typed constructors and from the registry
+/// gives the same poses, bit for bit, on a synthetic drive.
+#[test]
+fn typed_constructors_and_the_registry_build_the_same_matchers() {
+    use qicp_core::testdata::SyntheticWorld;
+    use qicp_core::{KdTree, LaserNoise, MutualNearest, Pose2, QuadTree, Record};
+    use qicp_matchers::{
+        IcpParams, Idc, IdcParams, KdIdc, KdWsm, Odometry, Pipeline, Policy, QIdc, QWsm, Relevance,
+        Wsm,
+    };
+    let (icp, idc, wsm) = (
+        IcpParams::default(),
+        IdcParams::default(),
+        WsmParams::default(),
+    );
+    let (map, scan) = (
+        Policy::Boosted(Relevance::default()),
+        Policy::Incremental(Relevance::default()),
+    );
+    let noise = LaserNoise::default();
+    let typed: Vec<(&str, Box<dyn Odometry>)> = vec![
+        (
+            "idc",
+            Box::new(Pipeline::new(
+                "idc",
+                Idc::<MutualNearest<QuadTree>>::new(icp, idc),
+                QuadTree::default(),
+                scan,
+                noise,
+            )),
+        ),
+        (
+            "wsm",
+            Box::new(Pipeline::new(
+                "wsm",
+                Wsm::<MutualNearest<QuadTree>>::new(icp, wsm),
+                QuadTree::default(),
+                scan,
+                noise,
+            )),
+        ),
+        (
+            "q-idc",
+            Box::new(QIdc::new(
+                "q-idc",
+                Idc::new(icp, idc),
+                QuadTree::default(),
+                map,
+                noise,
+            )),
+        ),
+        (
+            "q-wsm",
+            Box::new(QWsm::new(
+                "q-wsm",
+                Wsm::new(icp, wsm),
+                QuadTree::default(),
+                map,
+                noise,
+            )),
+        ),
+        (
+            "kd-idc",
+            Box::new(KdIdc::new(
+                "kd-idc",
+                Idc::new(icp, idc),
+                KdTree::default(),
+                map,
+                noise,
+            )),
+        ),
+        (
+            "kd-wsm",
+            Box::new(KdWsm::new(
+                "kd-wsm",
+                Wsm::new(icp, wsm),
+                KdTree::default(),
+                map,
+                noise,
+            )),
+        ),
+    ];
+    let world = SyntheticWorld::room();
+    for (name, mut typed) in typed {
+        let mut built = Registry::builtin().config(name).unwrap().build().unwrap();
+        for k in 0..30 {
+            let truth = Pose2::new(
+                -2.0 + 0.1 * k as f64,
+                -0.5 + 0.02 * k as f64,
+                0.03 * k as f64,
+            );
+            let mut s = world.scan(&truth, 0.005, k as u64 + 1);
+            s.timestamp = k as f64;
+            let record = Record {
+                scan: s,
+                // Odometry 5 % long and drifting in heading: the prior matters.
+                odometry: Pose2::new(truth.x * 1.05, truth.y, truth.theta * 1.02),
+                truth: Some(truth),
+                laser_offset: Pose2::IDENTITY,
+            };
+            let (a, b) = (typed.process(&record), built.process(&record));
+            assert_eq!(a.pose, b.pose, "{name}, scan {k}");
+            assert_eq!(a.inserted, b.inserted, "{name}, scan {k}");
+        }
+        assert_eq!(typed.reference_points(), built.reference_points(), "{name}");
+        let least = if name.contains('-') { 500 } else { 50 };
+        assert!(
+            typed.reference_points().len() > least,
+            "{name}: the reference holds scans"
+        );
+    }
 }
