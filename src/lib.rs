@@ -18,7 +18,13 @@ pub mod sweep;
 use qicp_matchers::Registry;
 use std::sync::LazyLock;
 
-static REGISTRY: LazyLock<Registry> = LazyLock::new(Registry::builtin);
+static REGISTRY: LazyLock<Registry> = LazyLock::new(|| {
+    let mut registry = Registry::builtin();
+    // PL-ICP lives in its own crate, written against the public qicp crates only: the
+    // command line offers it by registering it here, next to the built-in algorithms.
+    qicp_plicp::register(&mut registry);
+    registry
+});
 
 /// The registry the `qicp` command resolves matcher names with: the built-in algorithms and
 /// indexes, and the matchers of the crates this package registers next to them.

@@ -314,9 +314,28 @@ impl MatcherConfig {
                 ));
             }
         };
+        let icp = match table.remove("icp") {
+            None => algorithm.icp_defaults(),
+            Some(toml::Value::Table(given)) => {
+                // The algorithm's defaults, overridden key by key.
+                let mut merged = to_table(&algorithm.icp_defaults())?;
+                merged.extend(given);
+                toml::Value::Table(merged)
+                    .try_into()
+                    .map_err(|e: toml::de::Error| {
+                        ConfigError::Parse(format!("matcher.icp: {}", e.message().trim()))
+                    })?
+            }
+            Some(v) => {
+                return Err(ConfigError::invalid(
+                    "matcher.icp",
+                    format!("must be a table, not {v}"),
+                ));
+            }
+        };
         let mut c = Self {
             reference,
-            icp: section(&mut table, "icp")?,
+            icp,
             relevance: section(&mut table, "relevance")?,
             motion: section(&mut table, "motion")?,
             validation: section(&mut table, "validation")?,

@@ -151,6 +151,26 @@ impl IcpParams {
         }
     }
 
+    /// The level of the gate schedule to start at: with an odometry prior (information
+    /// `prior`), the last level whose gate still holds `sigmas` of its translation standard
+    /// deviations, at most one before the last level; 0 without a prior or with `sigmas` 0.
+    /// The wide gates exist for large initial errors, and odometry says how large they can be.
+    #[must_use]
+    pub fn first_level(&self, prior: Option<&nalgebra::Matrix3<f64>>, sigmas: f64) -> u32 {
+        let Some(lambda) = prior else { return 0 };
+        let information = lambda[(0, 0)].min(lambda[(1, 1)]);
+        if sigmas == 0.0 || information <= 0.0 {
+            return 0;
+        }
+        let needed = sigmas / information.sqrt();
+        let last = self.last_level();
+        let mut level = 0;
+        while level + 1 < last && self.gate(level + 1) >= needed {
+            level += 1;
+        }
+        level
+    }
+
     /// Number of shrinks from the first gate to the last.
     #[must_use]
     pub fn last_level(&self) -> u32 {

@@ -159,18 +159,7 @@ impl IdcParams {
     /// the last level; 0 otherwise.
     #[must_use]
     pub fn first_level(&self, icp: &IcpParams, prior: Option<&Matrix3<f64>>) -> u32 {
-        let Some(lambda) = prior else { return 0 };
-        let information = lambda[(0, 0)].min(lambda[(1, 1)]);
-        if self.gate_sigmas == 0.0 || information <= 0.0 {
-            return 0;
-        }
-        let needed = self.gate_sigmas / information.sqrt();
-        let last = icp.last_level();
-        let mut level = 0;
-        while level + 1 < last && icp.gate(level + 1) >= needed {
-            level += 1;
-        }
-        level
+        icp.first_level(prior, self.gate_sigmas)
     }
 }
 

@@ -52,6 +52,12 @@ pub trait Algorithm: 'static {
     /// The matcher, for the correspondence metric `C`.
     type Matcher<C: Metric>: ScanMatcher + Send + Debug + 'static;
 
+    /// This algorithm's defaults for the shared iteration section `[matcher.icp]` (keys the
+    /// configuration leaves out take these). Default: [`IcpParams::default`].
+    fn icp_defaults() -> IcpParams {
+        IcpParams::default()
+    }
+
     /// Builds the matcher.
     fn matcher<C: Metric>(icp: IcpParams, params: &Self::Params) -> Self::Matcher<C>;
 
@@ -225,6 +231,7 @@ pub(crate) trait ErasedAlgorithm: Send + Sync {
     fn name(&self) -> &'static str;
     fn summary(&self) -> &'static str;
     fn parameters(&self) -> &'static [Param];
+    fn icp_defaults(&self) -> IcpParams;
     /// Checks a user's section and returns the effective one (defaults filled in).
     fn effective(&self, section: &toml::Table) -> Result<toml::Table, ConfigError>;
     fn map_resolution(&self, section: &toml::Table) -> Result<f64, ConfigError>;
@@ -268,6 +275,9 @@ impl<A: Algorithm> ErasedAlgorithm for Registered<A> {
     }
     fn parameters(&self) -> &'static [Param] {
         A::PARAMETERS
+    }
+    fn icp_defaults(&self) -> IcpParams {
+        A::icp_defaults()
     }
     fn effective(&self, section: &toml::Table) -> Result<toml::Table, ConfigError> {
         to_table(&self.params(section)?)

@@ -1,0 +1,107 @@
+//! PL-ICP as a plug-in: registered from outside the framework, it is configured, checked,
+//! composed with every index and run like the built-in matchers.
+
+use qicp_core::testdata::SyntheticWorld;
+use qicp_core::{Pose2, Record};
+use qicp_matchers::{ConfigError, Registry};
+
+fn registry() -> Registry {
+    let mut r = Registry::builtin();
+    qicp_plicp::register(&mut r);
+    r
+}
+
+#[test]
+fn registering_adds_every_composed_name() {
+    let names = registry().names();
+    for name in ["plicp", "q-plicp", "kd-plicp", "bf-plicp", "q-wsm"] {
+        assert!(names.iter().any(|n| n == name), "{name} in {names:?}");
+    }
+    assert!(
+        !Registry::builtin()
+            .names()
+            .iter()
+            .any(|n| n.contains("plicp"))
+    );
+}
+
+#[test]
+fn its_section_is_checked_like_a_built_in_one() {
+    let r = registry();
+    let c = r
+        .parse("[matcher]\nalgorithm = \"plicp\"\n[matcher.plicp]\nsigma = 0.03\n")
+        .expect("valid");
+    assert_eq!(c.kind(), "q-plicp");
+    assert_eq!(c.params::<qicp_plicp::PlIcpParams>().unwrap().sigma, 0.03);
+    assert!(c.to_toml().contains("[matcher.plicp]"));
+    // Its own iteration defaults, overridable key by key.
+    assert_eq!(c.icp.max_dist_end, 0.1);
+    let e = r
+        .parse("[matcher]\nkind = \"plicp\"\n[matcher.plicp]\nsigm = 0.03\n")
+        .unwrap_err();
+    assert!(e.to_string().contains("matcher.plicp.sigm"), "{e}");
+    let e = r
+        .parse("[matcher]\nkind = \"plicp\"\n[matcher.plicp]\ntangent_weight = 2.0\n")
+        .unwrap_err();
+    assert!(
+        matches!(e, ConfigError::Invalid { .. }) && e.to_string().contains("tangent_weight"),
+        "{e}"
+    );
+    let e = r
+        .parse("[matcher]\nkind = \"plicp\"\n[matcher.wsm]\nsigma_range = 0.02\n")
+        .unwrap_err();
+    assert!(matches!(e, ConfigError::Unused { .. }), "{e}");
+    // The sweep perturbs its steering parameters too.
+    let keys = c.steering_parameters();
+    assert!(keys.iter().any(|k| k == "matcher.plicp.sigma"), "{keys:?}");
+    let scaled = c.scaled("matcher.plicp.sigma", 1.4).unwrap();
+    assert!((scaled.parameter("matcher.plicp.sigma").unwrap() - 0.042).abs() < 1e-12);
+}
+
+fn drive(kind: &str) -> Vec<Pose2> {
+    let world = SyntheticWorld::room();
+    let mut pipeline = registry().config(kind).unwrap().build().unwrap();
+    let mut out = Vec::new();
+    for k in 0..40 {
+        let truth = Pose2::new(
+            -2.5 + 0.1 * k as f64,
+            -0.8 + 0.03 * k as f64,
+            0.025 * k as f64,
+        );
+        let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
+        scan.timestamp = k as f64;
+        let record = Record {
+            scan,
+            // Odometry drifting by 1 cm and 0.3° a scan.
+            odometry: truth * Pose2::new(0.01 * k as f64, 0.0, (0.3 * k as f64).to_radians()),
+            truth: Some(truth),
+            laser_offset: Pose2::IDENTITY,
+        };
+        let e = pipeline.process(&record);
+        assert!(
+            e.pose.distance(&truth) < 0.03,
+            "{kind}, scan {k}: {:.3} m off",
+            e.pose.distance(&truth)
+        );
+        assert!(
+            qicp_core::normalize_angle(e.pose.theta - truth.theta).abs() < 0.01,
+            "{kind}, scan {k}"
+        );
+        out.push(e.pose);
+    }
+    out
+}
+
+#[test]
+fn plicp_recovers_the_drive_where_odometry_drifts() {
+    drive("plicp");
+}
+
+/// Identical answers across indexes: the boosted forms over the quad tree, the kd-tree and
+/// the brute-force oracle give the same poses.
+#[test]
+fn boosted_plicp_is_the_same_over_every_index() {
+    let q = drive("q-plicp");
+    assert_eq!(q, drive("kd-plicp"));
+    assert_eq!(q, drive("bf-plicp"));
+}
