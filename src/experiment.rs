@@ -84,6 +84,10 @@ pub struct RunArgs {
     /// config's upwards) and report medians.
     #[arg(long, value_name = "N")]
     pub worlds: Option<usize>,
+    /// Matchers run at once, one per thread (default: every core). Results do not depend on
+    /// it; only the per-scan times do, as matchers share the machine.
+    #[arg(long, value_name = "N")]
+    pub jobs: Option<std::num::NonZeroUsize>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -629,6 +633,74 @@ fn ratios(outcomes: &[MatcherOutcome]) -> Value {
     Value::Object(out)
 }
 
+/// Runs every matcher of `config` on `source`, `jobs` at a time (each matcher on one thread,
+/// taking the next from the list as it finishes), and writes each one's outputs under `out`.
+/// The outcomes come back in the list's order; each matcher is deterministic, so they are the
+/// same for any `jobs`.
+fn run_matchers(
+    config: &ExperimentConfig,
+    source: &Source,
+    out: &Path,
+    jobs: usize,
+    show_progress: bool,
+) -> Result<Vec<MatcherOutcome>> {
+    let kinds = &config.run.matchers;
+    let one = |kind: &String, progress: bool| -> Result<MatcherOutcome> {
+        let t = Instant::now();
+        let matcher = config.matcher(kind)?;
+        let run = run_matcher(&source.records, &matcher, progress)?;
+        write_run(&out.join(kind), &run, &matcher)?;
+        let scores =
+            Scores::of(&run.trajectory, source).with_context(|| format!("scoring {kind}"))?;
+        Ok(MatcherOutcome {
+            config: matcher,
+            trajectory: run.trajectory,
+            rows: run.rows,
+            summary: run.summary,
+            scores,
+            seconds: t.elapsed().as_secs_f64(),
+        })
+    };
+    let jobs = jobs.clamp(1, kinds.len().max(1));
+    if jobs == 1 {
+        return kinds.iter().map(|k| one(k, show_progress)).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<Result<MatcherOutcome>>>> =
+        kinds.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..jobs {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(kind) = kinds.get(i) else { break };
+                    let result = one(kind, false);
+                    if show_progress {
+                        match &result {
+                            Ok(o) => {
+                                eprintln!("{kind}: {} scans in {:.1} s", o.rows.len(), o.seconds)
+                            }
+                            Err(e) => eprintln!("{kind}: failed: {e:#}"),
+                        }
+                    }
+                    if let Ok(mut slot) = slots[i].lock() {
+                        *slot = Some(result);
+                    }
+                }
+            });
+        }
+    });
+    slots
+        .into_iter()
+        .zip(kinds)
+        .map(|(slot, kind)| {
+            slot.into_inner().ok().flatten().unwrap_or_else(|| {
+                Err(anyhow::anyhow!("{kind}: its thread ended without a result"))
+            })
+        })
+        .collect()
+}
+
 // ---------------------------------------------------------------------------------------------
 // The command
 
@@ -692,25 +764,13 @@ fn run_once(
     }
     let odometry_scores = Scores::of(&odometry, &source)?;
 
-    let show_progress = !args.quiet;
-    let mut outcomes = Vec::new();
-    for kind in &config.run.matchers {
-        let t = Instant::now();
-        let matcher = config.matcher(kind)?;
-        let run = run_matcher(&source.records, &matcher, show_progress)?;
-        write_run(&out.join(kind), &run, &matcher)?;
-        let scores =
-            Scores::of(&run.trajectory, &source).with_context(|| format!("scoring {kind}"))?;
-        outcomes.push(MatcherOutcome {
-            config: matcher,
-            trajectory: run.trajectory,
-            rows: run.rows,
-            summary: run.summary,
-            scores,
-            seconds: t.elapsed().as_secs_f64(),
-        });
-    }
-    let matching_seconds: f64 = outcomes.iter().map(|o| o.seconds).sum();
+    let t = Instant::now();
+    let jobs = args
+        .jobs
+        .or_else(|| std::thread::available_parallelism().ok())
+        .map_or(1, std::num::NonZeroUsize::get);
+    let outcomes = run_matchers(config, &source, out, jobs, !args.quiet)?;
+    let matching_seconds = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let pictures = if pictures {

@@ -24,6 +24,9 @@ enum Command {
     /// Match every scan of a CARMEN log with one matcher; write trajectory, per-scan figures
     /// and a summary.
     Match(match_cmd::MatchArgs),
+    /// List the registered algorithms (with their parameters' defaults, ranges and docs),
+    /// indexes, reference policies and the composed matcher names.
+    Matchers,
     /// Publish a CARMEN log's scans through the iceoryx2 bridge (`--publish`).
     Replay(bridge_cmd::ReplayArgs),
     /// Run an experiment: simulate or load a drive, run every matcher on it, score them and
@@ -42,6 +45,10 @@ fn main() -> Result<()> {
         Command::Bench(c) => bench::run(c),
         Command::Eval(c) => eval::run(c),
         Command::Match(a) => match_cmd::run(a),
+        Command::Matchers => {
+            print!("{}", match_cmd::listing(qicp::registry())?);
+            Ok(())
+        }
         Command::Replay(a) => bridge_cmd::run_replay(a),
         Command::Run(a) => experiment::run(a),
         Command::Sim(a) => sim_cmd::run(a),

@@ -159,3 +159,46 @@ pub fn run(args: MatchArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// What `qicp matchers` prints: every algorithm with its parameters (default, range, doc),
+/// the indexes and reference policies, and the composed names.
+pub fn listing(registry: &qicp_matchers::Registry) -> Result<String> {
+    use std::fmt::Write;
+    let mut out =
+        String::from("algorithms ([matcher] algorithm = NAME; parameters in [matcher.NAME]):\n");
+    for name in registry.algorithm_names() {
+        let Some((summary, params)) = registry.parameters(name) else {
+            continue;
+        };
+        let defaults = registry.config(name)?.to_table()?;
+        let section = defaults.get(name).and_then(toml::Value::as_table);
+        writeln!(out, "  {name}: {summary}")?;
+        for p in params {
+            let value = section
+                .and_then(|s| s.get(p.key))
+                .map_or_else(|| "?".into(), ToString::to_string);
+            let steering = if p.steering { " [swept]" } else { "" };
+            writeln!(
+                out,
+                "    {} = {value}  ({}){steering}: {}",
+                p.key,
+                p.range.describe(),
+                p.doc
+            )?;
+        }
+    }
+    writeln!(
+        out,
+        "indexes ([matcher] index = NAME; prefix of composed names):"
+    )?;
+    for i in registry.indexes() {
+        writeln!(out, "  {} ({}-): {}", i.name(), i.prefix(), i.summary())?;
+    }
+    writeln!(out, "references ([matcher] reference = NAME):")?;
+    for r in qicp_matchers::ReferenceKind::ALL {
+        writeln!(out, "  {}: {}", r.name(), r.summary())?;
+    }
+    writeln!(out, "names (--matcher NAME, [matcher] kind = NAME):")?;
+    writeln!(out, "  {}", registry.names().join(", "))?;
+    Ok(out)
+}

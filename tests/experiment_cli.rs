@@ -345,3 +345,56 @@ fn worlds_needs_a_simulated_source() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Matchers run concurrently give what they give one after another: every trajectory and
+/// per-scan figure but the times, byte for byte, with PL-ICP (registered by the command line
+/// from its own crate) among them.
+#[test]
+fn concurrent_matchers_give_the_sequential_results() {
+    let kinds = ["wsm", "q-wsm", "q-idc", "q-plicp"];
+    let dir = out_dir("jobs");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let with_plicp = dir.join("park_plicp.toml");
+    let park = repo().join("configs/worlds/park.toml");
+    std::fs::write(
+        &with_plicp,
+        format!(
+            "[source]\nsim = \"{}\"\nmax_scans = 40\n[run]\nmatchers = [{}]\n",
+            park.display(),
+            kinds.map(|k| format!("\"{k}\"")).join(", ")
+        ),
+    )
+    .expect("config");
+    let (one, three) = (dir.join("one"), dir.join("three"));
+    assert_success(&qicp_run(&with_plicp, &one, &["--jobs", "1", "--quiet"]));
+    assert_success(&qicp_run(&with_plicp, &three, &["--jobs", "3", "--quiet"]));
+    for kind in kinds {
+        let a = lines(&one.join(kind).join("trajectory.tum"));
+        assert_eq!(a.len(), 40, "{kind}");
+        assert_eq!(a, lines(&three.join(kind).join("trajectory.tum")), "{kind}");
+        // Per-scan figures without the time column.
+        let strip = |p: &Path| -> Vec<String> {
+            let rows = lines(p);
+            let header: Vec<&str> = rows[0].split(',').collect();
+            let ms = header
+                .iter()
+                .position(|h| *h == "ms")
+                .expect("an ms column");
+            rows.iter()
+                .map(|r| {
+                    r.split(',')
+                        .enumerate()
+                        .filter(|(i, _)| *i != ms)
+                        .map(|(_, v)| v)
+                        .collect::<Vec<_>>()
+                        .join(",")
+                })
+                .collect()
+        };
+        assert_eq!(
+            strip(&one.join(kind).join("matches.csv")),
+            strip(&three.join(kind).join("matches.csv")),
+            "{kind}"
+        );
+    }
+}

@@ -11,7 +11,26 @@
 //! - around Alg. 1, each switchable: [`Validator`] checks a match before it enters the map
 //!   ([`validation`]), and [`CorrelativeSearch`] (Olson 2009) re-matches a suspect scan from the
 //!   best pose of a window around the prediction ([`correlative`]);
-//! - [`MatcherConfig`]: the TOML registry that builds any of them as `Box<dyn Odometry>`.
+//! - [`Registry`]: algorithms and indexes by name, composed by a [`MatcherConfig`] (from
+//!   TOML or a name such as `"q-wsm"`) into a `Box<dyn Odometry>`. Another crate adds its
+//!   matcher with [`Registry::register`] (see `qicp-plicp`); its parameters are declared
+//!   once ([`Param`]) and checked like the built-in ones.
+//!
+//! ```
+//! use qicp_core::{Pose2, Record, testdata::SyntheticWorld};
+//! use qicp_matchers::Registry;
+//!
+//! let mut q_wsm = Registry::builtin().config("q-wsm")?.build()?;
+//! let room = SyntheticWorld::room();
+//! for k in 0..20 {
+//!     let truth = Pose2::new(0.1 * k as f64, 0.0, 0.02 * k as f64);
+//!     let odometry = truth * Pose2::new(0.01 * k as f64, 0.0, 0.0); // slipping wheels
+//!     let scan = room.scan(&truth, 0.005, k as u64);
+//!     let estimate = q_wsm.process(&Record { scan, odometry, truth: None, laser_offset: Pose2::IDENTITY });
+//!     assert!(estimate.pose.distance(&truth) < 0.02);
+//! }
+//! # Ok::<(), qicp_matchers::ConfigError>(())
+//! ```
 #![warn(missing_docs)]
 
 pub mod config;

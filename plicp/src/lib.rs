@@ -98,7 +98,7 @@ impl Algorithm for PlIcpAlgorithm {
             Range::Positive,
             "standard deviation of a pair's point-to-line distance (m)",
         ),
-        Param::new(
+        Param::steering(
             "tangent_weight",
             Range::Closed(0.0, 1.0),
             "weight of the along-line direction (0: pure point-to-line)",
