@@ -11,6 +11,8 @@
 //!   normals, spacing and covariance).
 #![warn(missing_docs)]
 
+#[cfg(feature = "testkit")]
+pub mod conformance;
 pub mod index;
 pub mod kdtree;
 pub mod matcher;
@@ -21,6 +23,7 @@ pub mod record;
 pub mod reference;
 pub mod result;
 pub mod scan;
+#[cfg(feature = "testkit")]
 pub mod testdata;
 
 pub use index::{BruteForce, IndexError, Neighbour, PointId, SpatialIndex, dist_sq};
