@@ -1022,7 +1022,7 @@ fn write_trajectory(path: &Path, traj: &[Stamped]) -> Result<()> {
 /// [`evaluate_ate`]); unchanged without truth.
 fn aligned(traj: &[Stamped], truth: Option<&[Stamped]>) -> Vec<Pose2> {
     let to_truth = match (traj.first(), truth.and_then(<[Stamped]>::first)) {
-        (Some((_, e)), Some((_, t))) => *t * e.inverse(),
+        (Some((_, e)), Some((_, t))) => crate::eval::origin_alignment(e, t),
         _ => Pose2::IDENTITY,
     };
     traj.iter().map(|(_, p)| to_truth * *p).collect()

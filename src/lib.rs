@@ -5,10 +5,13 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+/// Trajectory metrics: the `qicp-eval` crate.
+pub use qicp_eval as eval;
+/// Log readers and writers: the `qicp-io` crate.
+pub use qicp_io as logs;
 pub mod bridge_cmd;
-pub mod eval;
+pub mod eval_cmd;
 pub mod experiment;
-pub mod logs;
 pub mod match_cmd;
 pub mod matching;
 pub mod plots;

@@ -1,6 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-use qicp::{bench, bridge_cmd, eval, experiment, match_cmd, sim_cmd, sweep};
+use qicp::{bench, bridge_cmd, eval_cmd, experiment, match_cmd, sim_cmd, sweep};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -20,7 +20,7 @@ enum Command {
     Bench(bench::BenchCommand),
     /// Evaluate trajectories.
     #[command(subcommand)]
-    Eval(eval::EvalCommand),
+    Eval(eval_cmd::EvalCommand),
     /// Match every scan of a CARMEN log with one matcher; write trajectory, per-scan figures
     /// and a summary.
     Match(match_cmd::MatchArgs),
@@ -43,7 +43,7 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Bench(c) => bench::run(c),
-        Command::Eval(c) => eval::run(c),
+        Command::Eval(c) => eval_cmd::run(c),
         Command::Match(a) => match_cmd::run(a),
         Command::Matchers => {
             print!("{}", match_cmd::listing(qicp::registry())?);

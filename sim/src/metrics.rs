@@ -51,17 +51,11 @@ impl DriveScores {
         };
         s.path_length_m = pairs.windows(2).map(|w| w[0].0.distance(&w[1].0)).sum();
         s.loop_gap_m = first.0.distance(&last.0);
-        // Bring odometry's start onto the truth's start.
-        let align = first.0 * first.1.inverse();
-        let sq: f64 = pairs
-            .iter()
-            .map(|(t, o)| {
-                let d = t.distance(&(align * *o));
-                d * d
-            })
-            .sum();
-        s.odometry_ate_m = (sq / pairs.len() as f64).sqrt();
-        s.odometry_final_error_m = last.0.distance(&(align * last.1));
+        // Odometry's start brought onto the truth's start, as `qicp eval ate` does.
+        let estimated: Vec<(Pose2, Pose2)> = pairs.iter().map(|(t, o)| (*o, *t)).collect();
+        s.odometry_ate_m = qicp_eval::ate_rmse(&estimated);
+        let aligned = qicp_eval::align_origin(&estimated);
+        s.odometry_final_error_m = aligned.last().map_or(f64::NAN, |o| last.0.distance(o));
         s
     }
 }

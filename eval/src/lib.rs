@@ -1,4 +1,6 @@
-//! `qicp eval …`: trajectory metrics.
+//! # qicp-eval
+//!
+//! Trajectory metrics, returning typed reports that serialise:
 //!
 //! - [`evaluate_relations`]: the Freiburg SLAM benchmark metric (Kümmerle et al., "On
 //!   measuring the accuracy of SLAM algorithms", Autonomous Robots 27(4), 2009) for real logs
@@ -9,16 +11,16 @@
 //!
 //! Trajectories are `(timestamp, robot pose)` slices; they need not be sorted.
 
-use crate::logs::carmen::{CarmenOptions, read_carmen};
-use crate::logs::relations::{Relation, read_relations};
-use crate::logs::tum::{Stamped, read_tum};
-use crate::logs::{LogError, next_line, open_text, parse_f64};
-use anyhow::{Context, Result};
-use clap::{Args, Subcommand};
+#![warn(missing_docs)]
+
 use qicp_core::{Pose2, normalize_angle};
+use qicp_io::carmen::{CarmenOptions, read_carmen};
+use qicp_io::relations::Relation;
+use qicp_io::tum::{Stamped, read_tum};
+use qicp_io::{LogError, next_line, open_text, parse_f64};
 use serde::Serialize;
 use std::borrow::Cow;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use thiserror::Error;
 
 /// How far (s) an estimated pose may lie from a requested time and still stand for it.
@@ -416,6 +418,36 @@ pub fn associate(
     Ok((pairs, missing))
 }
 
+/// evo's `--align_origin`: the transform `truth₀ · inv(est₀)` that puts an estimate's first
+/// pose on the truth's.
+#[must_use]
+pub fn origin_alignment(est0: &Pose2, truth0: &Pose2) -> Pose2 {
+    *truth0 * est0.inverse()
+}
+
+/// The estimates of `(estimate, truth)` pairs after [`origin_alignment`] of the first pair.
+#[must_use]
+pub fn align_origin(pairs: &[(Pose2, Pose2)]) -> Vec<Pose2> {
+    let Some((e0, t0)) = pairs.first() else {
+        return Vec::new();
+    };
+    let to_truth = origin_alignment(e0, t0);
+    pairs.iter().map(|(e, _)| to_truth * *e).collect()
+}
+
+/// Root mean square of the position errors of `(estimate, truth)` pairs after
+/// [`align_origin`] (m); NaN for no pairs.
+#[must_use]
+pub fn ate_rmse(pairs: &[(Pose2, Pose2)]) -> f64 {
+    let aligned = align_origin(pairs);
+    let sq: f64 = aligned
+        .iter()
+        .zip(pairs)
+        .map(|(e, (_, t))| e.distance(t).powi(2))
+        .sum();
+    (sq / pairs.len() as f64).sqrt()
+}
+
 /// Compares an estimated trajectory with ground truth (see [`AteReport`] for definitions).
 pub fn evaluate_ate(
     est: &[Stamped],
@@ -431,15 +463,12 @@ pub fn evaluate_ate(
         });
     }
     let (pairs, missing) = associate(est, truth, opts.max_dt)?;
-    let Some(&(est0, truth0)) = pairs.first() else {
+    if pairs.is_empty() {
         return Err(EvalError::NoAssociations {
             max_dt: opts.max_dt,
         });
-    };
-
-    // evo's align_origin: est'ᵢ = truth₀ · inv(est₀) · estᵢ.
-    let to_truth = truth0 * est0.inverse();
-    let aligned: Vec<Pose2> = pairs.iter().map(|(e, _)| to_truth * *e).collect();
+    }
+    let aligned = align_origin(&pairs);
     let errors: Vec<f64> = aligned
         .iter()
         .zip(&pairs)
@@ -543,134 +572,6 @@ fn is_tum(path: &Path) -> Result<bool, LogError> {
         return Ok(parse_f64(first).is_some());
     }
     Ok(true)
-}
-
-// ---------------------------------------------------------------------------------------------
-// CLI
-
-/// Evaluations.
-#[derive(Debug, Subcommand)]
-pub enum EvalCommand {
-    /// Score a trajectory with Freiburg benchmark relations (Kümmerle et al. 2009).
-    Relations(RelationsArgs),
-    /// Compare a trajectory with ground truth: ATE after origin alignment, RPE per metre,
-    /// final error.
-    Ate(AteArgs),
-}
-
-/// Arguments of `qicp eval relations`.
-#[derive(Debug, Args)]
-pub struct RelationsArgs {
-    /// The trajectory: TUM file, or CARMEN log (its laser records' odometry is scored).
-    pub traj: PathBuf,
-    /// The `.relations` file (`t1 t2 x y z roll pitch yaw` per line).
-    pub relations: PathBuf,
-    /// Print JSON instead of a table.
-    #[arg(long)]
-    pub json: bool,
-    /// Association window (s) between relation and trajectory timestamps.
-    #[arg(long, default_value_t = DEFAULT_MAX_DT)]
-    pub max_dt: f64,
-}
-
-/// Arguments of `qicp eval ate`.
-#[derive(Debug, Args)]
-pub struct AteArgs {
-    /// The estimate: TUM file, or CARMEN log (its laser records' odometry).
-    pub est: PathBuf,
-    /// The ground truth: TUM file, or CARMEN log (its `TRUEPOS` at the laser records).
-    pub truth: PathBuf,
-    /// Print JSON instead of a table.
-    #[arg(long)]
-    pub json: bool,
-    /// Association window (s) between estimate and truth timestamps.
-    #[arg(long, default_value_t = DEFAULT_MAX_DT)]
-    pub max_dt: f64,
-    /// Segment length (m) of the relative pose error.
-    #[arg(long, default_value_t = DEFAULT_RPE_SEGMENT_M)]
-    pub rpe_segment: f64,
-}
-
-/// Runs the command.
-pub fn run(c: EvalCommand) -> Result<()> {
-    match c {
-        EvalCommand::Relations(a) => {
-            let traj = load_trajectory(&a.traj, LogPoses::Odometry)?;
-            let rels = read_relations(&a.relations)?;
-            let r = evaluate_relations(&traj, &rels, a.max_dt)
-                .with_context(|| format!("scoring {}", a.traj.display()))?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
-            } else {
-                println!("{}", relations_table(&r));
-            }
-            if r.n == 0 {
-                anyhow::bail!(
-                    "no relation of {} has poses within {} s in {} ({} relations): is it the \
-                     trajectory's relations file?",
-                    a.relations.display(),
-                    a.max_dt,
-                    a.traj.display(),
-                    rels.len()
-                );
-            }
-        }
-        EvalCommand::Ate(a) => {
-            let est = load_trajectory(&a.est, LogPoses::Odometry)?;
-            let truth = load_trajectory(&a.truth, LogPoses::Truth)?;
-            let opts = AteOptions {
-                max_dt: a.max_dt,
-                rpe_segment_m: a.rpe_segment,
-            };
-            let r = evaluate_ate(&est, &truth, &opts).with_context(|| {
-                format!("comparing {} with {}", a.est.display(), a.truth.display())
-            })?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
-            } else {
-                println!("{}", ate_table(&r));
-            }
-        }
-    }
-    Ok(())
-}
-
-fn relations_table(r: &RelationsReport) -> String {
-    format!(
-        "relations evaluated   {}\n\
-         relations missing     {}\n\
-         translational error   {:.4} ± {:.4} m (max {:.4} m)\n\
-         rotational error      {:.3} ± {:.3}° (max {:.3}°)",
-        r.n,
-        r.missing,
-        r.trans_mean,
-        r.trans_std,
-        r.trans_max,
-        r.rot_mean_deg,
-        r.rot_std_deg,
-        r.rot_max_deg
-    )
-}
-
-fn ate_table(r: &AteReport) -> String {
-    format!(
-        "pose pairs            {} ({} unpaired)\n\
-         ATE RMSE              {:.4} m (mean {:.4} m, max {:.4} m)\n\
-         RPE per {} m          {:.3} % translation, {:.4}°/m rotation ({} segments)\n\
-         final error           {:.4} m, {:.3}° after {:.2} m",
-        r.n,
-        r.missing,
-        r.ate_rmse_m,
-        r.ate_mean_m,
-        r.ate_max_m,
-        r.rpe_segment_m,
-        r.rpe_trans_per_m * 100.0,
-        r.rpe_rot_deg_per_m,
-        r.rpe_segments,
-        r.final_error_m,
-        r.final_heading_error_deg,
-        r.path_length_m
-    )
 }
 
 #[cfg(test)]

@@ -1,12 +1,41 @@
-//! Log readers and writers: CARMEN (`carmen`), TUM trajectories (`tum`), Freiburg benchmark
-//! relations (`relations`).
+//! # qicp-io
+//!
+//! Where records and trajectories come from and go to: CARMEN logs (`carmen`, read whole or
+//! streamed in bounded memory), TUM trajectories (`tum`), Freiburg benchmark relations
+//! (`relations`). A [`RecordSource`] yields records in time order: the streaming CARMEN
+//! reader here and the simulator (`qicp-sim`) alike (the bridge subscriber is driven by its
+//! transport's callbacks instead).
 //!
 //! Every reader names the file and the 1-based line of the first problem it meets; none
 //! panics on bad input.
 
+#![warn(missing_docs)]
+
 pub mod carmen;
 pub mod relations;
 pub mod tum;
+
+/// Records in time order, one at a time: what a matcher is fed.
+///
+/// Implemented by every iterator of `Result<Record, E>` (the streaming CARMEN reader, the
+/// simulator's drive), so a run is written once for all of them.
+pub trait RecordSource {
+    /// Why a record could not be produced.
+    type Error: std::error::Error + Send + Sync + 'static;
+    /// The next record; `None` at the end.
+    fn next_record(&mut self) -> Option<Result<qicp_core::Record, Self::Error>>;
+}
+
+impl<I, E> RecordSource for I
+where
+    I: Iterator<Item = Result<qicp_core::Record, E>>,
+    E: std::error::Error + Send + Sync + 'static,
+{
+    type Error = E;
+    fn next_record(&mut self) -> Option<Result<qicp_core::Record, E>> {
+        self.next()
+    }
+}
 
 use std::fs::File;
 use std::io::{BufRead, BufReader};
@@ -61,7 +90,7 @@ impl LogError {
     }
 
     /// A log that held no laser record.
-    pub(crate) fn empty(path: &Path, info: &carmen::LogInfo) -> Self {
+    pub fn empty(path: &Path, info: &carmen::LogInfo) -> Self {
         LogError::Empty {
             path: path.display().to_string(),
             report: info.report(),
@@ -97,10 +126,7 @@ pub fn open_text(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
 
 /// Reads lines as bytes into `buf` (cleared first), returning `false` at the end of input.
 /// Strips the line terminator (`\n` or `\r\n`).
-pub(crate) fn next_line<R: BufRead + ?Sized>(
-    reader: &mut R,
-    buf: &mut Vec<u8>,
-) -> std::io::Result<bool> {
+pub fn next_line<R: BufRead + ?Sized>(reader: &mut R, buf: &mut Vec<u8>) -> std::io::Result<bool> {
     buf.clear();
     if reader.read_until(b'\n', buf)? == 0 {
         return Ok(false);
@@ -164,6 +190,7 @@ pub(crate) fn read_rows8<R: BufRead + ?Sized>(
     Ok(())
 }
 
-pub(crate) fn parse_f64(token: &str) -> Option<f64> {
+/// A decimal number as the logs write it; `None` if the token is not one.
+pub fn parse_f64(token: &str) -> Option<f64> {
     token.parse::<f64>().ok()
 }

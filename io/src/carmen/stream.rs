@@ -8,7 +8,7 @@ use super::{
     CarmenOptions, FLASER_PARAMS, FlaserSettings, LogInfo, SKIPPED_EXAMPLES, flaser_geometry,
     flaser_settings, nearest,
 };
-use crate::logs::{LogError, next_line};
+use crate::{LogError, next_line};
 use qicp_core::{BeamGeometry, Pose2, Record, Scan};
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -94,7 +94,7 @@ impl<R> std::fmt::Debug for CarmenReader<R> {
 impl CarmenReader<Box<dyn BufRead + Send>> {
     /// Opens a CARMEN log, plain or bzip2-compressed.
     pub fn open(path: &Path, opts: &CarmenOptions) -> Result<Self, LogError> {
-        let reader = crate::logs::open_text(path)?;
+        let reader = crate::open_text(path)?;
         Self::new(reader, &path.display().to_string(), opts)
     }
 }
