@@ -506,7 +506,7 @@ impl<const B: usize> SpatialIndex for QuadTreeN<B> {
                 f[k - 1].dist_sq
             }
         };
-        self.traverse(q.x, q.y, &bound, |leaf| {
+        self.traverse(q.x, q.y, bound, |leaf| {
             let base = leaf as usize * B;
             for s in base..base + self.leaf_len[leaf as usize] as usize {
                 let dx = self.slot_x[s] - q.x;

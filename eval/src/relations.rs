@@ -1,0 +1,188 @@
+//! The Freiburg SLAM benchmark metric (Kümmerle et al. 2009): relations between poses of
+//! the trajectory, scored whole or as the poses stream past ([`RelationProbe`]).
+
+use crate::{EvalError, check_max_dt, nearest_index, stats, time_sorted};
+use qicp_core::{Pose2, normalize_angle};
+use qicp_io::relations::Relation;
+use qicp_io::tum::Stamped;
+use serde::Serialize;
+
+/// The error of one relation: estimated `inv(P1)·P2` minus the relation, component-wise.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RelationError {
+    /// Time of the first pose (s).
+    pub t1: f64,
+    /// Time of the second pose (s).
+    pub t2: f64,
+    /// x error (m).
+    pub dx: f64,
+    /// y error (m).
+    pub dy: f64,
+    /// Heading error, normalised (rad).
+    pub dyaw: f64,
+}
+
+impl RelationError {
+    /// Translational error `sqrt(dx² + dy²)` (m).
+    #[must_use]
+    pub fn trans(&self) -> f64 {
+        self.dx.hypot(self.dy)
+    }
+
+    /// Rotational error `|dyaw|` (rad).
+    #[must_use]
+    pub fn rot(&self) -> f64 {
+        self.dyaw.abs()
+    }
+}
+
+/// The Freiburg benchmark summary of a trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RelationsReport {
+    /// Relations evaluated.
+    pub n: usize,
+    /// Relations skipped because the trajectory has no pose within `max_dt` of `t1` or `t2`.
+    pub missing: usize,
+    /// Mean translational error (m).
+    pub trans_mean: f64,
+    /// Standard deviation of the translational error (m; population, divided by n).
+    pub trans_std: f64,
+    /// Largest translational error (m).
+    pub trans_max: f64,
+    /// Mean rotational error (degrees).
+    pub rot_mean_deg: f64,
+    /// Standard deviation of the rotational error (degrees; population).
+    pub rot_std_deg: f64,
+    /// Largest rotational error (degrees).
+    pub rot_max_deg: f64,
+}
+
+/// The error of every relation whose two poses the trajectory has (nearest in time, within
+/// `max_dt`), and the number of relations it has not.
+pub fn relation_errors(
+    traj: &[Stamped],
+    relations: &[Relation],
+    max_dt: f64,
+) -> Result<(Vec<RelationError>, usize), EvalError> {
+    check_max_dt(max_dt)?;
+    let traj = time_sorted(traj);
+    let mut errors = Vec::with_capacity(relations.len());
+    let mut missing = 0;
+    for r in relations {
+        let (Some(i), Some(j)) = (
+            nearest_index(&traj, r.t1, max_dt),
+            nearest_index(&traj, r.t2, max_dt),
+        ) else {
+            missing += 1;
+            continue;
+        };
+        // Kümmerle et al. 2009: ε(δ) = δ_est ⊖ δ*, here component-wise.
+        let est = traj[i].1.between(&traj[j].1);
+        errors.push(RelationError {
+            t1: r.t1,
+            t2: r.t2,
+            dx: est.x - r.delta.x,
+            dy: est.y - r.delta.y,
+            dyaw: normalize_angle(est.theta - r.delta.theta),
+        });
+    }
+    Ok((errors, missing))
+}
+
+/// Picks from a trajectory streamed in time order the poses that relations need, so that a
+/// long run is scored in memory that grows with the relations, not with the poses.
+///
+/// [`RelationProbe::trajectory`] holds, for every relation time, the pose
+/// [`nearest_index`] would pick from the whole trajectory (the same tie rule), so
+/// [`evaluate_relations`] on it gives the figures of the whole trajectory.
+#[derive(Debug, Clone)]
+pub struct RelationProbe {
+    /// Relation times, sorted, without repeats.
+    times: Vec<f64>,
+    /// Best pose so far for each time.
+    best: Vec<Option<Stamped>>,
+    /// First time a later pose can still improve.
+    lo: usize,
+    max_dt: f64,
+    last: f64,
+}
+
+impl RelationProbe {
+    /// A probe for `relations`, taking poses within `max_dt` of their times.
+    pub fn new(relations: &[Relation], max_dt: f64) -> Result<Self, EvalError> {
+        check_max_dt(max_dt)?;
+        let mut times: Vec<f64> = relations.iter().flat_map(|r| [r.t1, r.t2]).collect();
+        times.sort_by(f64::total_cmp);
+        times.dedup();
+        Ok(Self {
+            best: vec![None; times.len()],
+            times,
+            lo: 0,
+            max_dt,
+            last: f64::NEG_INFINITY,
+        })
+    }
+
+    /// Offers the next pose of the trajectory; poses must come in time order.
+    pub fn push(&mut self, t: f64, pose: Pose2) -> Result<(), EvalError> {
+        if t < self.last || t.is_nan() {
+            return Err(EvalError::OutOfOrder {
+                t,
+                previous: self.last,
+            });
+        }
+        self.last = t;
+        while self.lo < self.times.len() && self.times[self.lo] < t - self.max_dt {
+            self.lo += 1;
+        }
+        for i in self.lo..self.times.len() {
+            let want = self.times[i];
+            if want > t + self.max_dt {
+                break;
+            }
+            let d = (t - want).abs();
+            let better = match self.best[i] {
+                None => true,
+                // As `nearest_index`: the last pose before `want` wins a tie with one after.
+                Some((s, _)) => {
+                    let held = (s - want).abs();
+                    if t < want { d <= held } else { d < held }
+                }
+            };
+            if better {
+                self.best[i] = Some((t, pose));
+            }
+        }
+        Ok(())
+    }
+
+    /// The poses picked, in time order.
+    #[must_use]
+    pub fn trajectory(&self) -> Vec<Stamped> {
+        let mut picked: Vec<Stamped> = self.best.iter().flatten().copied().collect();
+        picked.dedup_by(|a, b| a.0 == b.0 && a.1 == b.1);
+        picked
+    }
+}
+
+/// Scores a trajectory with benchmark relations: mean, standard deviation and maximum of the
+/// translational and rotational errors. With no relation evaluated the statistics are NaN.
+pub fn evaluate_relations(
+    traj: &[Stamped],
+    relations: &[Relation],
+    max_dt: f64,
+) -> Result<RelationsReport, EvalError> {
+    let (errors, missing) = relation_errors(traj, relations, max_dt)?;
+    let (trans_mean, trans_std, trans_max) = stats(errors.iter().map(RelationError::trans));
+    let (rot_mean, rot_std, rot_max) = stats(errors.iter().map(RelationError::rot));
+    Ok(RelationsReport {
+        n: errors.len(),
+        missing,
+        trans_mean,
+        trans_std,
+        trans_max,
+        rot_mean_deg: rot_mean.to_degrees(),
+        rot_std_deg: rot_std.to_degrees(),
+        rot_max_deg: rot_max.to_degrees(),
+    })
+}

@@ -1,0 +1,297 @@
+//! The experiment file: its source, the matchers to run and their overrides.
+
+use super::*;
+
+/// An experiment configuration that cannot be used.
+#[derive(Debug, Error)]
+pub enum ExperimentError {
+    /// The file cannot be read.
+    #[error("reading {path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The TOML does not parse or does not fit the schema (unknown key, wrong type…).
+    #[error("{0}")]
+    Parse(String),
+    /// A value is missing, contradictory or out of range.
+    #[error("`{key}`: {why}")]
+    Invalid {
+        /// Dotted path of the key.
+        key: String,
+        /// What is wrong.
+        why: String,
+    },
+    /// A per-kind matcher table is not a valid matcher configuration.
+    #[error("`matchers.{kind}`: {source}")]
+    Matcher {
+        /// The kind whose table is wrong.
+        kind: String,
+        /// What the matcher registry said.
+        source: qicp_matchers::ConfigError,
+    },
+}
+
+pub(super) fn invalid(key: &str, why: impl Into<String>) -> ExperimentError {
+    ExperimentError::Invalid {
+        key: key.into(),
+        why: why.into(),
+    }
+}
+
+/// `[source]`: where the records come from. Exactly one of `sim` and `log`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SourceConfig {
+    /// A drive configuration for the simulator (`configs/worlds/*.toml`). Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sim: Option<PathBuf>,
+    /// A CARMEN log (plain or `.bz2`). Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log: Option<PathBuf>,
+    /// Freiburg benchmark relations of the log. Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relations: Option<PathBuf>,
+    /// Ground truth of the log: TUM file or CARMEN log with `TRUEPOS`. Default: the log's own
+    /// `TRUEPOS` records, if every laser record has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub groundtruth: Option<PathBuf>,
+    /// Only the first `max_scans` scans. Default: all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_scans: Option<usize>,
+    /// Override the drive's `[drive] seed` (sim only). Default: the drive's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Override the world's `[world] seed`, its procedural layout (sim only). Default: the
+    /// world's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_seed: Option<u64>,
+    /// Skip and count malformed log lines instead of failing (log only). Default false.
+    #[serde(default)]
+    pub lenient: bool,
+}
+
+impl SourceConfig {
+    /// The drive of a `sim` source at `sim`, with the source's seeds and length applied.
+    pub fn drive(&self, sim: &Path) -> Result<qicp_sim::SimConfig> {
+        let mut cfg = qicp_sim::SimConfig::load(sim)
+            .with_context(|| format!("loading drive {}", sim.display()))?;
+        if let Some(seed) = self.seed {
+            cfg.drive.seed = seed;
+        }
+        if let Some(seed) = self.world_seed {
+            cfg.world.seed = seed;
+        }
+        if self.max_scans.is_some() {
+            cfg.drive.max_scans = self.max_scans;
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
+/// `[run]`: what runs over the records.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunConfig {
+    /// Matcher kinds, in report order. Default [`DEFAULT_MATCHERS`].
+    #[serde(default = "default_matchers")]
+    pub matchers: Vec<String>,
+}
+
+pub(super) fn default_matchers() -> Vec<String> {
+    DEFAULT_MATCHERS.map(String::from).to_vec()
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            matchers: default_matchers(),
+        }
+    }
+}
+
+/// An experiment: a source, the matchers, per-kind parameter overrides.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentConfig {
+    /// Where the records come from.
+    pub source: SourceConfig,
+    /// What runs.
+    #[serde(default)]
+    pub run: RunConfig,
+    /// Per-kind overrides: each a `[matcher]` table without `kind`. Default: none (every
+    /// matcher with its registry defaults).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub matchers: BTreeMap<String, toml::Table>,
+}
+
+impl ExperimentConfig {
+    /// Parses a TOML document and validates it. Relative paths stay as written; see
+    /// [`ExperimentConfig::resolve`].
+    pub fn from_toml(text: &str) -> Result<Self, ExperimentError> {
+        let c: Self = toml::from_str(text).map_err(|e| ExperimentError::Parse(e.to_string()))?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// Reads, validates and resolves a file: relative paths become relative to its directory.
+    pub fn load(path: &Path) -> Result<Self, ExperimentError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ExperimentError::Io {
+            path: path.display().to_string(),
+            source: e,
+        })?;
+        let mut c = Self::from_toml(&text).map_err(|e| match e {
+            ExperimentError::Parse(m) => ExperimentError::Parse(format!("{}: {m}", path.display())),
+            other => other,
+        })?;
+        c.resolve(path.parent().unwrap_or(Path::new(".")));
+        Ok(c)
+    }
+
+    /// Makes every relative source path relative to `base` instead, and absolute (so the
+    /// effective config written elsewhere still finds them).
+    pub fn resolve(&mut self, base: &Path) {
+        let s = &mut self.source;
+        for p in [&mut s.sim, &mut s.log, &mut s.relations, &mut s.groundtruth]
+            .into_iter()
+            .flatten()
+        {
+            let joined = base.join(&*p);
+            *p = std::fs::canonicalize(&joined)
+                .or_else(|_| std::path::absolute(&joined))
+                .unwrap_or(joined);
+        }
+    }
+
+    /// Checks the source, the matcher list and every per-kind table; names the bad key.
+    pub fn validate(&self) -> Result<(), ExperimentError> {
+        let s = &self.source;
+        match (&s.sim, &s.log) {
+            (None, None) => {
+                return Err(invalid(
+                    "source",
+                    "give `sim` (a drive) or `log` (a CARMEN log)",
+                ));
+            }
+            (Some(_), Some(_)) => return Err(invalid("source", "give `sim` or `log`, not both")),
+            (Some(_), None) => {
+                for (key, set) in [
+                    ("source.relations", s.relations.is_some()),
+                    ("source.groundtruth", s.groundtruth.is_some()),
+                    ("source.lenient", s.lenient),
+                ] {
+                    if set {
+                        return Err(invalid(
+                            key,
+                            "only for a `log` source (a simulated drive has its own ground truth)",
+                        ));
+                    }
+                }
+            }
+            (None, Some(_)) => {
+                for (key, set) in [
+                    ("source.seed", s.seed.is_some()),
+                    ("source.world_seed", s.world_seed.is_some()),
+                ] {
+                    if set {
+                        return Err(invalid(key, "only for a `sim` source"));
+                    }
+                }
+            }
+        }
+        if s.max_scans == Some(0) {
+            return Err(invalid(
+                "source.max_scans",
+                "is 0: nothing would be matched",
+            ));
+        }
+        if self.run.matchers.is_empty() {
+            return Err(invalid(
+                "run.matchers",
+                "is empty: name at least one matcher kind",
+            ));
+        }
+        let mut seen = std::collections::BTreeSet::new();
+        let registry = crate::registry();
+        for k in &self.run.matchers {
+            if !seen.insert(k) {
+                return Err(invalid("run.matchers", format!("`{k}` is listed twice")));
+            }
+            registry.resolve(k).map_err(|_| {
+                invalid(
+                    "run.matchers",
+                    format!(
+                        "unknown matcher kind `{k}`; known: {}",
+                        registry.names().join(", ")
+                    ),
+                )
+            })?;
+        }
+        for kind in self.matchers.keys() {
+            let name = kind;
+            registry.resolve(kind).map_err(|_| {
+                invalid(
+                    &format!("matchers.{name}"),
+                    format!(
+                        "unknown matcher kind; known: {}",
+                        registry.names().join(", ")
+                    ),
+                )
+            })?;
+            if !self.run.matchers.contains(kind) {
+                return Err(invalid(
+                    &format!("matchers.{name}"),
+                    "parameters for a kind that `run.matchers` does not list",
+                ));
+            }
+            self.matcher(kind)?;
+        }
+        Ok(())
+    }
+
+    /// The effective configuration of `kind`: its registry defaults, overridden by its
+    /// `[matchers.<kind>]` table.
+    pub fn matcher(&self, kind: &str) -> Result<MatcherConfig, ExperimentError> {
+        let err = |source| ExperimentError::Matcher {
+            kind: kind.into(),
+            source,
+        };
+        let Some(table) = self.matchers.get(kind) else {
+            return crate::registry().config(kind).map_err(err);
+        };
+        if table.contains_key("kind") {
+            return Err(err(qicp_matchers::ConfigError::Invalid {
+                key: "kind".into(),
+                why: "the table's name is the kind; drop `kind`".into(),
+            }));
+        }
+        let mut matcher = table.clone();
+        matcher.insert("kind".into(), toml::Value::String(kind.into()));
+        let mut doc = toml::Table::new();
+        doc.insert("matcher".into(), toml::Value::Table(matcher));
+        let text = toml::to_string(&doc).map_err(|e| ExperimentError::Parse(e.to_string()))?;
+        crate::registry().parse(&text).map_err(err)
+    }
+
+    /// The effective configuration as TOML: the source and run as loaded (paths resolved) and
+    /// every matcher's parameters spelled out under `[matchers.<kind>]`. It loads back as an
+    /// experiment that runs the same.
+    pub fn effective_toml(&self) -> Result<String, ExperimentError> {
+        let mut c = self.clone();
+        for kind in &self.run.matchers {
+            let m = self.matcher(kind)?;
+            let mut value = m.to_table().map_err(|source| ExperimentError::Matcher {
+                kind: kind.clone(),
+                source,
+            })?;
+            for axis in ["algorithm", "reference", "index"] {
+                value.remove(axis);
+            }
+            c.matchers.insert(kind.clone(), value);
+        }
+        toml::to_string_pretty(&c).map_err(|e| ExperimentError::Parse(e.to_string()))
+    }
+}

@@ -1,0 +1,391 @@
+//! `qicp run CONFIG`: one experiment end to end. Simulate (or load) a drive, run every
+//! matcher over the same records, score them, write the results and draw the paper's figures.
+//!
+//! ```toml
+//! [source]
+//! sim = "worlds/park.toml"     # a drive config (relative to this file), or:
+//! # log = "../../shared/data/intel/intel.clf.bz2"   # a CARMEN log (plain or .bz2)
+//! # relations = "../../shared/data/intel/intel.relations"  # Freiburg relations (log only)
+//! # groundtruth = "truth.tum"  # TUM file or CARMEN log with TRUEPOS (log only)
+//! # max_scans = 100            # only the first scans (default: all)
+//! # seed = 3                   # override the drive's noise seed (sim only)
+//! # world_seed = 8             # override the world's layout seed (sim only)
+//! # lenient = false            # skip and count malformed log lines (log only)
+//!
+//! [run]
+//! matchers = ["idc", "q-idc", "wsm", "q-wsm", "kd-wsm"]   # the default
+//!
+//! [matchers.q-wsm]             # optional, per kind: a [matcher] table without `kind`
+//! icp = { max_iterations = 30 }
+//! ```
+//!
+//! Outputs in `--out DIR` (default `out/<config stem>`):
+//!
+//! - `summary.json`: per matcher ATE/RPE/final error (with ground truth), Freiburg relation
+//!   errors (with relations), residual, certainty (m²) and position σ, timing, map size,
+//!   fallbacks; the same for raw odometry; boosted/incremental ratios; the experiment's wall
+//!   time;
+//! - `<kind>/trajectory.tum`, `<kind>/matches.csv`, `<kind>/config.toml`;
+//! - `groundtruth.tum` (when known), `odometry.tum`;
+//! - `config.toml`: the effective experiment, every matcher's parameters spelled out (it runs
+//!   again as is);
+//! - `map_<kind>.png`, `trajectories.png`, `residual.png`, `certainty.png`.
+//!
+//! With `--worlds N` (a `sim` source) the experiment runs on N worlds: layout seeds
+//! `world_seed`, `world_seed + 1`, … and noise seeds `seed`, `seed + 1`, … (defaults: the drive
+//! config's), each in `DIR/world-<layout seed>/` without pictures; `DIR/worlds.json` and the
+//! printed table give the median, minimum and maximum of every figure over the worlds. One
+//! layout or one noise draw can be lucky or unlucky; the medians are what a method should be
+//! judged by. (The corridor's layout is fixed; there only the noise changes.)
+
+use crate::eval::{
+    AteOptions, AteReport, LogPoses, RelationsReport, evaluate_ate, evaluate_relations,
+};
+use crate::logs::carmen::{CarmenOptions, read_carmen};
+use crate::logs::relations::{Relation, read_relations};
+use crate::logs::tum::{Stamped, write_tum};
+use crate::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_run};
+use crate::plots::{self, Panel, PathSeries, ScanSeries};
+use anyhow::{Context, Result};
+use qicp_core::{Pose2, Record};
+use qicp_matchers::{MatcherConfig, ReferenceKind};
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value, json};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use thiserror::Error;
+
+mod config;
+mod pictures;
+mod source;
+mod worlds;
+
+pub use config::*;
+use pictures::{draw_pictures, write_trajectory};
+pub use source::*;
+use worlds::run_worlds;
+
+/// The matchers an experiment runs when `[run] matchers` is not given.
+pub const DEFAULT_MATCHERS: [&str; 5] = ["idc", "q-idc", "wsm", "q-wsm", "kd-wsm"];
+
+/// Arguments of `qicp run`.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// The experiment's TOML file, e.g. `configs/park.toml`.
+    pub config: PathBuf,
+    /// Output directory (created if missing). Default `out/<config stem>`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print summary.json on stdout (instead of the table).
+    #[arg(long)]
+    pub json: bool,
+    /// Print nothing but errors.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Use this CARMEN log instead of the config's source (relations and ground truth of the
+    /// config are kept).
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Override `[source] max_scans`.
+    #[arg(long)]
+    pub max_scans: Option<usize>,
+    /// Repeat the experiment on this many simulated worlds (layout and noise seeds from the
+    /// config's upwards) and report medians.
+    #[arg(long, value_name = "N")]
+    pub worlds: Option<usize>,
+    /// Matchers run at once, one per thread (default: every core). Results do not depend on
+    /// it; only the per-scan times do, as matchers share the machine.
+    #[arg(long, value_name = "N")]
+    pub jobs: Option<std::num::NonZeroUsize>,
+}
+
+/// Runs every matcher of `config` on `source`, `jobs` at a time (each matcher on one thread,
+/// taking the next from the list as it finishes), and writes each one's outputs under `out`.
+/// The outcomes come back in the list's order; each matcher is deterministic, so they are the
+/// same for any `jobs`.
+fn run_matchers(
+    config: &ExperimentConfig,
+    source: &Source,
+    out: &Path,
+    jobs: usize,
+    show_progress: bool,
+) -> Result<Vec<MatcherOutcome>> {
+    let kinds = &config.run.matchers;
+    let one = |kind: &String, progress: bool| -> Result<MatcherOutcome> {
+        let t = Instant::now();
+        let matcher = config.matcher(kind)?;
+        let run = run_matcher(&source.records, &matcher, progress)?;
+        write_run(&out.join(kind), &run, &matcher)?;
+        let scores =
+            Scores::of(&run.trajectory, source).with_context(|| format!("scoring {kind}"))?;
+        Ok(MatcherOutcome {
+            config: matcher,
+            trajectory: run.trajectory,
+            rows: run.rows,
+            summary: run.summary,
+            scores,
+            seconds: t.elapsed().as_secs_f64(),
+        })
+    };
+    let jobs = jobs.clamp(1, kinds.len().max(1));
+    if jobs == 1 {
+        return kinds.iter().map(|k| one(k, show_progress)).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<Result<MatcherOutcome>>>> =
+        kinds.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..jobs {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(kind) = kinds.get(i) else { break };
+                    let result = one(kind, false);
+                    if show_progress {
+                        match &result {
+                            Ok(o) => {
+                                eprintln!("{kind}: {} scans in {:.1} s", o.rows.len(), o.seconds)
+                            }
+                            Err(e) => eprintln!("{kind}: failed: {e:#}"),
+                        }
+                    }
+                    if let Ok(mut slot) = slots[i].lock() {
+                        *slot = Some(result);
+                    }
+                }
+            });
+        }
+    });
+    slots
+        .into_iter()
+        .zip(kinds)
+        .map(|(slot, kind)| {
+            slot.into_inner().ok().flatten().unwrap_or_else(|| {
+                Err(anyhow::anyhow!("{kind}: its thread ended without a result"))
+            })
+        })
+        .collect()
+}
+
+/// Runs the command.
+pub fn run(args: RunArgs) -> Result<()> {
+    let started = Instant::now();
+    let mut config = ExperimentConfig::load(&args.config)?;
+    if let Some(log) = &args.log {
+        config.source.sim = None;
+        config.source.seed = None;
+        config.source.log = Some(
+            std::fs::canonicalize(log)
+                .or_else(|_| std::path::absolute(log))
+                .unwrap_or_else(|_| log.clone()),
+        );
+    }
+    if args.max_scans.is_some() {
+        config.source.max_scans = args.max_scans;
+    }
+    config.validate()?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        let stem = args
+            .config
+            .file_stem()
+            .map_or("experiment".into(), |s| s.to_string_lossy().into_owned());
+        PathBuf::from("out").join(stem)
+    });
+    if let Some(n) = args.worlds {
+        return run_worlds(&args, &config, &out, n, started);
+    }
+    let summary = run_once(&args, &config, &out, true, started)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else if !args.quiet {
+        println!("{}", table(&summary, &config.run.matchers));
+        println!("outputs in {}", out.display());
+    }
+    Ok(())
+}
+
+/// One experiment into `out`: its records, every matcher, the scores, the pictures (when
+/// `pictures`) and `summary.json`, which it returns.
+fn run_once(
+    args: &RunArgs,
+    config: &ExperimentConfig,
+    out: &Path,
+    pictures: bool,
+    started: Instant,
+) -> Result<Value> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    std::fs::write(out.join("config.toml"), config.effective_toml()?)
+        .with_context(|| format!("writing {}", out.join("config.toml").display()))?;
+
+    let t = Instant::now();
+    let source = Source::load(&config.source)?;
+    let source_seconds = t.elapsed().as_secs_f64();
+    let odometry = source.odometry();
+    write_trajectory(&out.join("odometry.tum"), &odometry)?;
+    if let Some(truth) = &source.truth {
+        write_trajectory(&out.join("groundtruth.tum"), truth)?;
+    }
+    let odometry_scores = Scores::of(&odometry, &source)?;
+
+    let t = Instant::now();
+    let jobs = args
+        .jobs
+        .or_else(|| std::thread::available_parallelism().ok())
+        .map_or(1, std::num::NonZeroUsize::get);
+    let outcomes = run_matchers(config, &source, out, jobs, !args.quiet)?;
+    let matching_seconds = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let pictures = if pictures {
+        draw_pictures(out, &source, &odometry, &outcomes)?
+    } else {
+        json!({})
+    };
+    let plot_seconds = t.elapsed().as_secs_f64();
+
+    let mut matchers = Map::new();
+    for o in &outcomes {
+        matchers.insert(o.kind(), o.to_json()?);
+    }
+    let mut odo = Map::new();
+    odometry_scores.insert_into(&mut odo)?;
+    let summary = json!({
+        "source": source.name,
+        "config": args.config.display().to_string(),
+        "scans": source.records.len(),
+        "ground_truth": source.truth.is_some(),
+        "matchers": matchers,
+        "odometry": odo,
+        "ratios": ratios(&outcomes),
+        "pictures": pictures,
+        "source_seconds": source_seconds,
+        "matching_seconds": matching_seconds,
+        "plot_seconds": plot_seconds,
+        "wall_seconds": started.elapsed().as_secs_f64(),
+    });
+    let text = serde_json::to_string_pretty(&summary)?;
+    write_atomic(&out.join("summary.json"), format!("{text}\n").as_bytes())?;
+    Ok(summary)
+}
+
+/// The table printed after a run.
+fn table(summary: &Value, kinds: &[String]) -> String {
+    let f = |v: &Value, scale: f64, digits: usize| {
+        v.as_f64()
+            .map_or_else(|| "-".to_string(), |x| format!("{:.digits$}", x * scale))
+    };
+    let truth = summary["ground_truth"].as_bool().unwrap_or(false);
+    let relations = kinds
+        .first()
+        .is_some_and(|k| summary["matchers"][k.as_str()].get("relations").is_some());
+    let mut head = vec!["matcher"];
+    if truth {
+        head.extend(["ATE m", "RPE %", "final m"]);
+    }
+    if relations {
+        head.extend(["rel. trans m", "rel. rot °"]);
+    }
+    head.extend([
+        "resid. mm",
+        "certainty mm²",
+        "σ mm",
+        "ms/scan",
+        "p99 ms",
+        "map pts",
+        "fallbacks",
+    ]);
+    let mut rows: Vec<Vec<String>> = Vec::new();
+    let mut row_of = |name: &str, m: &Value, matched: bool| {
+        let mut r = vec![name.to_string()];
+        if truth {
+            r.push(f(&m["ate_rmse_m"], 1.0, 3));
+            r.push(f(&m["rpe_trans_per_m"], 100.0, 2));
+            r.push(f(&m["final_error_m"], 1.0, 3));
+        }
+        if relations {
+            r.push(f(&m["relations"]["trans_mean"], 1.0, 3));
+            r.push(f(&m["relations"]["rot_mean_deg"], 1.0, 2));
+        }
+        if matched {
+            r.push(f(&m["residual_mean_mm"], 1.0, 2));
+            r.push(f(&m["certainty_mean"], 1e6, 2));
+            r.push(f(&m["sigma_mean_mm"], 1.0, 2));
+            r.push(f(&m["ms_per_scan_median"], 1.0, 2));
+            r.push(f(&m["ms_per_scan_p99"], 1.0, 2));
+            r.push(m["map_points"].to_string());
+            r.push(m["fallbacks"].to_string());
+        } else {
+            r.extend(std::iter::repeat_n("-".to_string(), 7));
+        }
+        rows.push(r);
+    };
+    row_of("odometry", &summary["odometry"], false);
+    for k in kinds {
+        row_of(k, &summary["matchers"][k.as_str()], true);
+    }
+    let widths: Vec<usize> = (0..head.len())
+        .map(|c| {
+            rows.iter()
+                .map(|r| r[c].chars().count())
+                .chain([head[c].chars().count()])
+                .max()
+                .unwrap_or(0)
+        })
+        .collect();
+    let line = |cells: Vec<String>| {
+        cells
+            .iter()
+            .enumerate()
+            .map(|(c, s)| {
+                if c == 0 {
+                    format!("{s:<w$}", w = widths[c])
+                } else {
+                    format!("{s:>w$}", w = widths[c])
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("  ")
+    };
+    let mut text = format!(
+        "{} — {} scans\n",
+        summary["source"].as_str().unwrap_or("?"),
+        summary["scans"]
+    );
+    text += &line(head.iter().map(|s| (*s).to_string()).collect());
+    text.push('\n');
+    for r in rows {
+        text += &line(r);
+        text.push('\n');
+    }
+    if let Some(ratios) = summary["ratios"].as_object().filter(|r| !r.is_empty()) {
+        text += "\nboosted / incremental:";
+        for (pair, r) in ratios {
+            let parts: Vec<String> = [
+                "ate",
+                "residual",
+                "certainty",
+                "certainty_per_scan_median",
+                "sigma",
+                "relations_trans",
+            ]
+            .iter()
+            .filter_map(|k| {
+                r.get(*k)
+                    .and_then(Value::as_f64)
+                    .map(|v| format!("{k} {v:.3}"))
+            })
+            .collect();
+            text += &format!("\n  {pair}: {}", parts.join(", "));
+        }
+        text.push('\n');
+    }
+    text += &format!(
+        "\nwall time {:.2} s (source {:.2} s, matching {:.2} s, pictures {:.2} s)",
+        summary["wall_seconds"].as_f64().unwrap_or(f64::NAN),
+        summary["source_seconds"].as_f64().unwrap_or(f64::NAN),
+        summary["matching_seconds"].as_f64().unwrap_or(f64::NAN),
+        summary["plot_seconds"].as_f64().unwrap_or(f64::NAN),
+    );
+    text
+}

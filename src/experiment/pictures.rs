@@ -1,0 +1,207 @@
+//! The pictures of a run: maps, paths, and the paper's per-scan figures.
+
+use super::*;
+
+pub(super) fn write_trajectory(path: &Path, traj: &[Stamped]) -> Result<()> {
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    write_tum(&mut w, traj).with_context(|| format!("writing {}", path.display()))?;
+    std::io::Write::flush(&mut w).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// `traj` moved so its first pose lies on `truth`'s first (the ATE alignment of
+/// [`evaluate_ate`]); unchanged without truth.
+pub(super) fn aligned(traj: &[Stamped], truth: Option<&[Stamped]>) -> Vec<Pose2> {
+    let to_truth = match (traj.first(), truth.and_then(<[Stamped]>::first)) {
+        (Some((_, e)), Some((_, t))) => crate::eval::origin_alignment(e, t),
+        _ => Pose2::IDENTITY,
+    };
+    traj.iter().map(|(_, p)| to_truth * *p).collect()
+}
+
+/// Draws every picture; returns `{file: what it shows}`.
+pub(super) fn draw_pictures(
+    out: &Path,
+    source: &Source,
+    odometry: &[Stamped],
+    outcomes: &[MatcherOutcome],
+) -> Result<Value> {
+    let mut pictures = Map::new();
+    let truth = source.truth.as_deref();
+    let truth_poses: Option<Vec<Pose2>> = truth.map(|t| t.iter().map(|p| p.1).collect());
+    let scans: Vec<&qicp_core::Scan> = source.records.iter().map(|r| &r.scan).collect();
+    let aligned_note = if truth.is_some() {
+        ", start aligned with the truth"
+    } else {
+        ""
+    };
+
+    // Maps (paper Figs. 3, 5): one per matcher, drawn in parallel (each is independent).
+    let maps: Vec<(String, Result<usize, plots::PlotError>)> = std::thread::scope(|s| {
+        let handles: Vec<_> = outcomes
+            .iter()
+            .map(|o| {
+                let (scans, truth_poses) = (&scans, &truth_poses);
+                s.spawn(move || {
+                    let poses = aligned(&o.trajectory, truth);
+                    let lasers: Vec<Pose2> = poses
+                        .iter()
+                        .zip(&source.records)
+                        .map(|(p, r)| *p * r.laser_offset)
+                        .collect();
+                    let file = format!("map_{}.png", o.kind());
+                    let title = format!("{}: every scan at its estimated pose", o.kind());
+                    let r = plots::occupancy_map(
+                        &out.join(&file),
+                        &title,
+                        &lasers,
+                        scans,
+                        &poses,
+                        truth_poses.as_deref(),
+                    );
+                    (file, r)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    (
+                        "map".into(),
+                        Err(plots::PlotError::Empty {
+                            path: "map".into(),
+                            why: "drawing thread panicked",
+                        }),
+                    )
+                })
+            })
+            .collect()
+    });
+    for (file, r) in maps {
+        r?;
+        pictures.insert(
+            file,
+            json!("occupancy grid of every scan at the matcher's poses: black hit, white free, grey unseen; blue estimated path, grey true path (paper Figs. 3, 5)"),
+        );
+    }
+
+    // Trajectories.
+    let aligned_all: Vec<Vec<Pose2>> = outcomes
+        .iter()
+        .map(|o| aligned(&o.trajectory, truth))
+        .collect();
+    let odo = aligned(odometry, truth);
+    let mut series = Vec::new();
+    if let Some(t) = &truth_poses {
+        series.push(PathSeries {
+            label: "ground truth".into(),
+            poses: t,
+            color: plots::TRUTH_COLOR,
+            width: 4,
+            dashed: false,
+        });
+    }
+    series.push(PathSeries {
+        label: "odometry".into(),
+        poses: &odo,
+        color: plots::ODOMETRY_COLOR,
+        width: 2,
+        dashed: false,
+    });
+    for (k, (o, poses)) in outcomes.iter().zip(&aligned_all).enumerate() {
+        series.push(PathSeries {
+            label: o.kind(),
+            poses,
+            color: plots::PALETTE[k % plots::PALETTE.len()],
+            width: 2,
+            // kd-tree kinds often coincide with their quad-tree twins: dashed, both show.
+            dashed: o.config.reference == ReferenceKind::Map && o.config.index() != "quadtree",
+        });
+    }
+    let title = format!("Robot paths, {} scans{aligned_note}", source.records.len());
+    plots::trajectories(&out.join("trajectories.png"), &title, &series)?;
+    pictures.insert(
+        "trajectories.png".into(),
+        json!("every matcher's path with the ground truth (black) and raw odometry (grey), metres"),
+    );
+
+    // Paper Fig. 4: per family, the boosted matcher in front of the incremental one.
+    // The quad-tree form first, as the paper draws it.
+    let pairs: Vec<(&MatcherOutcome, &MatcherOutcome)> = outcomes
+        .iter()
+        .filter(|i| i.config.reference == ReferenceKind::Scan)
+        .filter_map(|i| {
+            let twins = || {
+                outcomes.iter().filter(|b| {
+                    b.config.reference == ReferenceKind::Map
+                        && b.config.algorithm() == i.config.algorithm()
+                })
+            };
+            let b = twins()
+                .find(|b| b.config.index() == "quadtree")
+                .or_else(|| twins().next())?;
+            Some((i, b))
+        })
+        .collect();
+    if !pairs.is_empty() {
+        let (inc_color, boost_color) = (plots::PALETTE[0], plots::PALETTE[1]);
+        let residual: Vec<Panel> = pairs
+            .iter()
+            .map(|(i, b)| Panel {
+                title: format!(
+                    "Residual correlation distance, {} vs {}",
+                    b.kind(),
+                    i.kind()
+                ),
+                series: vec![
+                    ScanSeries {
+                        label: i.kind(),
+                        values: i.rows.iter().map(|r| r.residual_mm).collect(),
+                        color: inc_color,
+                    },
+                    ScanSeries {
+                        label: b.kind(),
+                        values: b.rows.iter().map(|r| r.residual_mm).collect(),
+                        color: boost_color,
+                    },
+                ],
+                reference: None,
+                y_cap: None,
+            })
+            .collect();
+        plots::per_scan(
+            &out.join("residual.png"),
+            "residual correlation distance (mm)",
+            &residual,
+        )?;
+        pictures.insert("residual.png".into(), json!("residual correlation distance per scan (mm), boosted in front of incremental, thick lines the means (paper Fig. 4a-b)"));
+        let certainty: Vec<Panel> = pairs
+            .iter()
+            .map(|(i, b)| Panel {
+                title: format!("Matching certainty, {} relative to {}", b.kind(), i.kind()),
+                series: vec![ScanSeries {
+                    label: format!("{} / {}", b.kind(), i.kind()),
+                    values: b
+                        .rows
+                        .iter()
+                        .zip(&i.rows)
+                        .map(|(rb, ri)| rb.certainty / ri.certainty)
+                        .collect(),
+                    color: boost_color,
+                }],
+                reference: Some(1.0),
+                y_cap: Some(3.0),
+            })
+            .collect();
+        plots::per_scan(
+            &out.join("certainty.png"),
+            "certainty ratio (boosted / incremental)",
+            &certainty,
+        )?;
+        pictures.insert("certainty.png".into(), json!("per scan, the boosted matcher's certainty sqrt(σxx²+σyy²) (covariance diagonal, m²) divided by the incremental one's; dashed: 1, thick: the mean (paper Fig. 4c-d)"));
+    }
+    Ok(Value::Object(pictures))
+}
