@@ -101,6 +101,18 @@ impl NormalEquations {
         h
     }
 
+    /// The covariance of the estimate: H⁻¹ scaled by the a-posteriori variance factor, so
+    /// that it also reflects how well the pairs actually fit (standard weighted least squares;
+    /// Pfister et al.). The identity ("unknown") when H cannot be inverted.
+    #[must_use]
+    pub fn covariance(&self) -> Matrix3<f64> {
+        self.information()
+            .try_inverse()
+            .map(|c| c * self.variance_factor())
+            .filter(|c| c.iter().all(|v| v.is_finite()))
+            .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0))
+    }
+
     /// Solves for the step; `None` if the system is singular or the step not finite.
     #[must_use]
     pub fn solve(&self) -> Option<Vector3<f64>> {

@@ -301,14 +301,8 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
         // pose along its axis to the sample spacing (tests/wsm_covariance.rs).
         let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
         add_prior(&mut ne, prior.as_ref(), &guess, &pose);
-        // Pfister et al.: covariance = H⁻¹, scaled by the a-posteriori variance factor so that
-        // it also reflects how well the pairs actually fit (standard weighted least squares).
-        let covariance = ne
-            .information()
-            .try_inverse()
-            .map(|c| c * ne.variance_factor())
-            .filter(|c| c.iter().all(|v| v.is_finite()))
-            .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0));
+        // Pfister et al.: covariance = H⁻¹, scaled by the a-posteriori variance factor.
+        let covariance = ne.covariance();
         MatchResult {
             pose,
             covariance,

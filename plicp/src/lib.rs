@@ -304,12 +304,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         }
         let mut ne = self.information(reference, local, &pose);
         qicp_matchers::wsm::add_prior(&mut ne, prior.map(|(l, _)| l), &guess, &pose);
-        let covariance = ne
-            .information()
-            .try_inverse()
-            .map(|c| c * ne.variance_factor())
-            .filter(|c| c.iter().all(|v| v.is_finite()))
-            .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0));
+        let covariance = ne.covariance();
         MatchResult {
             pose,
             covariance,

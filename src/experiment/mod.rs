@@ -269,6 +269,23 @@ fn run_once(
     Ok(summary)
 }
 
+/// One line of a printed table: the first cell left-aligned, the others right-aligned, each
+/// padded to its column's width.
+fn table_line(cells: &[String], widths: &[usize]) -> String {
+    cells
+        .iter()
+        .enumerate()
+        .map(|(c, s)| {
+            if c == 0 {
+                format!("{s:<w$}", w = widths[c])
+            } else {
+                format!("{s:>w$}", w = widths[c])
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("  ")
+}
+
 /// The table printed after a run.
 fn table(summary: &Value, kinds: &[String]) -> String {
     let f = |v: &Value, scale: f64, digits: usize| {
@@ -333,20 +350,7 @@ fn table(summary: &Value, kinds: &[String]) -> String {
                 .unwrap_or(0)
         })
         .collect();
-    let line = |cells: Vec<String>| {
-        cells
-            .iter()
-            .enumerate()
-            .map(|(c, s)| {
-                if c == 0 {
-                    format!("{s:<w$}", w = widths[c])
-                } else {
-                    format!("{s:>w$}", w = widths[c])
-                }
-            })
-            .collect::<Vec<_>>()
-            .join("  ")
-    };
+    let line = |cells: Vec<String>| table_line(&cells, &widths);
     let mut text = format!(
         "{} — {} scans\n",
         summary["source"].as_str().unwrap_or("?"),

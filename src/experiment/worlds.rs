@@ -174,18 +174,7 @@ pub(super) fn worlds_table(report: &Value, kinds: &[String]) -> String {
             .unwrap_or_default(),
     );
     for r in rows {
-        let cells: Vec<String> = r
-            .iter()
-            .enumerate()
-            .map(|(c, s)| {
-                if c == 0 {
-                    format!("{s:<w$}", w = widths[c])
-                } else {
-                    format!("{s:>w$}", w = widths[c])
-                }
-            })
-            .collect();
-        text += &cells.join("  ");
+        text += &table_line(&r, &widths);
         text.push('\n');
     }
     if let Some(ratios) = report["ratios"].as_object().filter(|r| !r.is_empty()) {
