@@ -1,0 +1,120 @@
+//! Runs in parallel over the cores, one variant at a time per core.
+
+use super::*;
+
+/// The figures of one run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunFigures {
+    /// Mean translational relation error (m).
+    pub trans_mean: f64,
+    /// Largest translational relation error (m).
+    pub trans_max: f64,
+    /// Mean rotational relation error (degrees).
+    pub rot_mean_deg: f64,
+    /// Median wall time per scan (ms): the only figure that varies from run to run.
+    pub ms_per_scan_median: f64,
+    /// Points in the reference at the end.
+    pub map_points: usize,
+    /// Records matched.
+    pub scans: usize,
+    /// Relations evaluated.
+    pub relations: usize,
+    /// Relations without poses at their times (outside the scans, or dropped by `scans/2`).
+    pub relations_missing: usize,
+    /// Relations with a translational error above [`FAILURE_M`].
+    pub relations_over_0_5_m: usize,
+}
+
+/// One run to make.
+#[derive(Debug)]
+pub(super) struct Job {
+    pub(super) name: String,
+    pub(super) input: Option<InputVariant>,
+    /// The configuration, or why the variant has none.
+    pub(super) config: Result<MatcherConfig, String>,
+}
+
+impl Job {
+    pub(super) fn run(&self, records: &[Record], relations: &[Relation]) -> Result<RunFigures> {
+        let config = match &self.config {
+            Ok(c) => c,
+            Err(e) => bail!("{e}"),
+        };
+        let records: Cow<'_, [Record]> = match self.input {
+            None => Cow::Borrowed(records),
+            Some(v) => Cow::Owned(v.apply(records)?),
+        };
+        let run = run_matcher(&records, config, false)?;
+        let report = evaluate_relations(&run.trajectory, relations, MAX_DT)?;
+        let (errors, _) = relation_errors(&run.trajectory, relations, MAX_DT)?;
+        Ok(RunFigures {
+            trans_mean: report.trans_mean,
+            trans_max: report.trans_max,
+            rot_mean_deg: report.rot_mean_deg,
+            ms_per_scan_median: run.summary.ms_per_scan_median,
+            map_points: run.summary.map_points,
+            scans: run.summary.scans,
+            relations: report.n,
+            relations_missing: report.missing,
+            relations_over_0_5_m: errors
+                .iter()
+                .map(RelationError::trans)
+                .filter(|&e| e > FAILURE_M)
+                .count(),
+        })
+    }
+}
+
+/// The message of a caught panic.
+pub(super) fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".to_string())
+}
+
+/// Runs `work` on every item with `jobs` worker threads pulling indices from a shared counter,
+/// calling `done` (on this thread) as each item finishes. The results are in item order; a
+/// panicking item gives an error, not a dead sweep.
+pub fn run_parallel<T: Sync, R: Send>(
+    items: &[T],
+    jobs: usize,
+    work: impl Fn(&T) -> Result<R> + Sync,
+    mut done: impl FnMut(usize, &Result<R, String>, Duration),
+) -> Vec<Result<R, String>> {
+    let next = AtomicUsize::new(0);
+    let mut results: Vec<Option<Result<R, String>>> = items.iter().map(|_| None).collect();
+    std::thread::scope(|s| {
+        let (tx, rx) = std::sync::mpsc::channel();
+        for _ in 0..jobs.clamp(1, items.len().max(1)) {
+            let tx = tx.clone();
+            let (next, work) = (&next, &work);
+            s.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(item) = items.get(i) else { break };
+                    let t0 = Instant::now();
+                    let result =
+                        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(item)))
+                            .map_err(|p| format!("panicked: {}", panic_message(p.as_ref())))
+                            .and_then(|r| r.map_err(|e| format!("{e:#}")));
+                    if tx.send((i, result, t0.elapsed())).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for (i, result, elapsed) in rx {
+            done(i, &result, elapsed);
+            if let Some(slot) = results.get_mut(i) {
+                *slot = Some(result);
+            }
+        }
+    });
+    results
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| Err("no result (worker lost)".to_string())))
+        .collect()
+}

@@ -1,0 +1,150 @@
+//! The fixed variants of a sweep: what each one changes.
+
+use super::*;
+
+/// The input variants: what each does to the log before matching.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputVariant {
+    /// `scans/2`: every second record.
+    EveryOtherRecord,
+    /// `beams/2`: every second beam of every scan.
+    EveryOtherBeam,
+    /// `odom-noise`: random odometry drift.
+    OdometryNoise,
+    /// `odom-bias`: systematic odometry drift.
+    OdometryBias,
+    /// `range-noise`: Gaussian noise on the valid ranges.
+    RangeNoise,
+    /// `max-range-10`: returns beyond 10 m dropped.
+    MaxRange10,
+}
+
+impl InputVariant {
+    /// Every input variant, in report order.
+    pub const ALL: [InputVariant; 6] = [
+        InputVariant::EveryOtherRecord,
+        InputVariant::EveryOtherBeam,
+        InputVariant::OdometryNoise,
+        InputVariant::OdometryBias,
+        InputVariant::RangeNoise,
+        InputVariant::MaxRange10,
+    ];
+
+    /// The variant's name on the command line and in reports.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            InputVariant::EveryOtherRecord => "scans/2",
+            InputVariant::EveryOtherBeam => "beams/2",
+            InputVariant::OdometryNoise => "odom-noise",
+            InputVariant::OdometryBias => "odom-bias",
+            InputVariant::RangeNoise => "range-noise",
+            InputVariant::MaxRange10 => "max-range-10",
+        }
+    }
+
+    /// The records perturbed (the random variants draw from a generator seeded with
+    /// [`SEED`], so the result is always the same).
+    pub fn apply(self, records: &[Record]) -> Result<Vec<Record>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+        let scans = |f: &mut dyn FnMut(&Scan) -> Result<Scan, ScanError>| {
+            records
+                .iter()
+                .map(|r| {
+                    let mut out = r.clone();
+                    out.scan = f(&r.scan)
+                        .with_context(|| format!("{}: scan at {} s", self.name(), r.timestamp()))?;
+                    Ok(out)
+                })
+                .collect::<Result<Vec<_>>>()
+        };
+        match self {
+            InputVariant::EveryOtherRecord => Ok(every_other_record(records)),
+            InputVariant::EveryOtherBeam => scans(&mut every_other_beam),
+            InputVariant::OdometryNoise => Ok(with_odometry_increments(records, |d| {
+                noisy_increment(d, &mut rng)
+            })),
+            InputVariant::OdometryBias => Ok(with_odometry_increments(records, biased_increment)),
+            InputVariant::RangeNoise => {
+                scans(&mut |s| noisy_ranges(s, RANGE_NOISE_SIGMA, &mut rng))
+            }
+            InputVariant::MaxRange10 => scans(&mut |s| capped_range(s, CAPPED_MAX_RANGE)),
+        }
+    }
+}
+
+/// What a variant changes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Perturbation {
+    /// The input.
+    Input(InputVariant),
+    /// One parameter of the configuration, scaled.
+    Parameter {
+        /// Dotted key, as [`MatcherConfig::steering_parameters`] gives it.
+        key: String,
+        /// The factor.
+        factor: f64,
+    },
+}
+
+/// One variant of the sweep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Variant {
+    /// Its name: `scans/2`, `icp.max_dist_start*0.7`…
+    pub name: String,
+    /// What it changes.
+    pub perturbation: Perturbation,
+}
+
+/// Every variant for `config`, in report order: the input variants, then each steering
+/// parameter times each of [`PARAMETER_FACTORS`]. A parameter variant is named by its key
+/// without the leading `matcher.`, a `*` and the factor: `icp.max_dist_start*0.7`.
+#[must_use]
+pub fn all_variants(config: &MatcherConfig) -> Vec<Variant> {
+    let inputs = InputVariant::ALL.into_iter().map(|v| Variant {
+        name: v.name().to_string(),
+        perturbation: Perturbation::Input(v),
+    });
+    let parameters = config.steering_parameters().into_iter().flat_map(|key| {
+        PARAMETER_FACTORS.into_iter().map(move |factor| {
+            let short = key.strip_prefix("matcher.").unwrap_or(&key);
+            Variant {
+                name: format!("{short}*{factor}"),
+                perturbation: Perturbation::Parameter {
+                    key: key.clone(),
+                    factor,
+                },
+            }
+        })
+    });
+    inputs.chain(parameters).collect()
+}
+
+/// The variants named in `names` (in report order, each once); `default` is accepted and
+/// ignored, since the default run always happens. An unknown name is an error listing the
+/// known ones.
+pub fn select_variants(all: Vec<Variant>, names: &[String]) -> Result<Vec<Variant>> {
+    let names: Vec<&str> = names
+        .iter()
+        .map(|n| n.trim())
+        .filter(|n| !n.is_empty() && *n != "default")
+        .collect();
+    let unknown: Vec<&str> = names
+        .iter()
+        .copied()
+        .filter(|n| !all.iter().any(|v| v.name == *n))
+        .collect();
+    if !unknown.is_empty() {
+        let known: Vec<&str> = all.iter().map(|v| v.name.as_str()).collect();
+        bail!(
+            "unknown variant{} {}; known: {}",
+            if unknown.len() > 1 { "s" } else { "" },
+            unknown.join(", "),
+            known.join(", ")
+        );
+    }
+    Ok(all
+        .into_iter()
+        .filter(|v| names.contains(&v.name.as_str()))
+        .collect())
+}
