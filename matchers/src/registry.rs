@@ -473,13 +473,19 @@ impl Registry {
         self.algorithms.iter().any(|a| a.name() == name)
     }
 
-    /// The axes of a composed name: `wsm` → (wsm, scan, quadtree), `kd-wsm` → (wsm, map, kdtree).
+    /// The axes of a composed name: `wsm` → (wsm, scan, quadtree), `kd-wsm` → (wsm, map, kdtree),
+    /// `wsm@kdtree` → (wsm, scan, kdtree).
     pub fn resolve(
         &self,
         name: &str,
     ) -> Result<(&'static str, ReferenceKind, &'static str), ConfigError> {
         if let Ok(a) = self.algorithm(name) {
             return Ok((a.name(), ReferenceKind::Scan, "quadtree"));
+        }
+        if let Some((algorithm, index)) = name.split_once('@')
+            && let (Ok(a), Ok(i)) = (self.algorithm(algorithm), self.index(index))
+        {
+            return Ok((a.name(), ReferenceKind::Scan, i.name));
         }
         for i in &self.indexes {
             if let Some(rest) = name

@@ -228,6 +228,13 @@ fn every_algorithm_composes_with_every_index() {
         let config = registry.config(name).unwrap();
         assert_eq!(config.build().unwrap().kind(), name);
     }
+    // Scan to scan over another index: the name composes and resolves back.
+    let c = MatcherConfig::from_toml(
+        "[matcher]\nalgorithm = \"wsm\"\nreference = \"scan\"\nindex = \"kdtree\"\n",
+    )
+    .unwrap();
+    assert_eq!(c.kind(), "wsm@kdtree");
+    assert_eq!(registry.config("wsm@kdtree").unwrap(), c);
 }
 
 /// The declared ranges are what the checks enforce: each parameter's description names the
