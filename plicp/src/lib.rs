@@ -57,7 +57,7 @@ pub struct PlIcpParams {
     pub outlier_order: f64,
     /// … and the multiple (0 turns the rejection off). Default 0 (off): the pairs that fix a
     /// corridor's length are its few far ones, and on Intel the rejection at 2 turned
-    /// q-plicp's 0.06 m into 1.8 m.
+    /// q-plicp's 0.058 m into 2.06 m.
     pub outlier_mult: f64,
     /// Normal compatibility: a pair whose two surface normals (the reference point's and
     /// the scan point's, turned into the reference frame) differ by more than this (deg)
