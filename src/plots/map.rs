@@ -281,17 +281,7 @@ pub fn occupancy_map(
         (x0, x1),
         (y0, y1),
     );
-    tri!(
-        out,
-        chart
-            .configure_series_labels()
-            .position(corner)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font((FONT, 16))
-            .draw()
-    );
-    tri!(out, root.present());
+    finish_with_legend(out, &root, &mut chart, corner)?;
     Ok(grid.occupied_cells())
 }
 
@@ -385,6 +375,27 @@ pub(super) fn draw_path<'a, 'b: 'a>(
 }
 
 /// A legend line for something drawn without a label.
+/// Draws the legend in `corner` and writes the picture.
+pub(super) fn finish_with_legend<'a, 'b: 'a>(
+    out: &Path,
+    root: &DrawingArea<BitMapBackend<'b>, Shift>,
+    chart: &mut ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    corner: SeriesLabelPosition,
+) -> Result<(), PlotError> {
+    tri!(
+        out,
+        chart
+            .configure_series_labels()
+            .position(corner)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font((FONT, 16))
+            .draw()
+    );
+    tri!(out, root.present());
+    Ok(())
+}
+
 pub(super) fn legend_entry<'a, 'b: 'a>(
     out: &Path,
     chart: &mut ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,

@@ -116,16 +116,6 @@ pub fn trajectories(out: &Path, title: &str, series: &[PathSeries<'_>]) -> Resul
         (x0, x1),
         (y0, y1),
     );
-    tri!(
-        out,
-        chart
-            .configure_series_labels()
-            .position(corner)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font((FONT, 16))
-            .draw()
-    );
-    tri!(out, root.present());
+    finish_with_legend(out, &root, &mut chart, corner)?;
     Ok(())
 }
