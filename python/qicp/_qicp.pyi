@@ -1,0 +1,147 @@
+"""Type stubs of the qicp extension module."""
+
+from os import PathLike
+from typing import Iterator, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+Pose = Tuple[float, float, float]
+"""A planar pose (x m, y m, θ rad)."""
+
+Trajectory = Union[npt.ArrayLike, Sequence[Tuple[float, float, float, float]]]
+"""An N×4 array of (t s, x m, y m, θ rad)."""
+
+StrPath = Union[str, "PathLike[str]"]
+
+class QicpError(Exception):
+    """A refusal of qicp, with the message the command line prints."""
+
+class MatchResult:
+    """What a matcher says about one scan."""
+
+    @property
+    def timestamp(self) -> float:
+        """Time of the scan (s)."""
+    @property
+    def pose(self) -> Pose:
+        """The robot's pose in the world, as the command line's trajectory has it."""
+    @property
+    def covariance(self) -> npt.NDArray[np.float64]:
+        """3×3 covariance (x, y, θ) of the match, in the reference frame."""
+    @property
+    def residual(self) -> float:
+        """Mean distance of the final pairs (m); NaN for a fallback."""
+    @property
+    def certainty(self) -> float:
+        """The paper's matching certainty sqrt(σxx² + σyy²) (m²); NaN for a fallback."""
+    @property
+    def fallback(self) -> Optional[str]:
+        """Why the pose is odometry's rather than a match's, or None."""
+    @property
+    def inserted(self) -> bool:
+        """Whether the scan entered the reference."""
+    @property
+    def iterations(self) -> int:
+        """Iterations the matcher ran."""
+    @property
+    def correspondences(self) -> int:
+        """Correspondences in the final iteration."""
+
+class Record:
+    """One laser record of a log."""
+
+    @property
+    def timestamp(self) -> float: ...
+    @property
+    def ranges(self) -> npt.NDArray[np.float64]:
+        """Raw ranges as measured (m)."""
+    @property
+    def angle_min(self) -> float: ...
+    @property
+    def angle_increment(self) -> float: ...
+    @property
+    def range_max(self) -> float: ...
+    @property
+    def range_min(self) -> float: ...
+    @property
+    def odometry(self) -> Pose:
+        """Robot pose by odometry."""
+    @property
+    def truth(self) -> Optional[Pose]:
+        """Robot pose by ground truth, where the log has it."""
+    @property
+    def laser_offset(self) -> Pose:
+        """Pose of the laser on the robot."""
+
+class CarmenLog:
+    """The laser records of a CARMEN log, read as they are asked for."""
+
+    def __iter__(self) -> Iterator[Record]: ...
+    def __next__(self) -> Record: ...
+    @property
+    def skipped_lines(self) -> int:
+        """Lines skipped as malformed so far (only with lenient=True)."""
+
+class Matcher:
+    """A laser-odometry pipeline: feed it scans in time order, get the robot's pose.
+
+    ``Matcher(kind, **sections)`` builds the matcher the registry names ``kind`` (see
+    ``matcher_names()``; ``qicp matchers`` lists every parameter), with the TOML sections of
+    ``[matcher]`` given as dicts: ``Matcher("q-wsm", icp={"max_dist_start": 0.7})``.
+    """
+
+    def __init__(self, kind: str = "q-wsm", **sections: dict) -> None: ...
+    @staticmethod
+    def from_toml(path: StrPath) -> "Matcher":
+        """The matcher a TOML file's ``[matcher]`` describes."""
+    @property
+    def kind(self) -> str: ...
+    def config_toml(self) -> str:
+        """The whole configuration, every default filled in, as TOML."""
+    def process(
+        self,
+        ranges: npt.ArrayLike,
+        angle_min: float,
+        angle_increment: float,
+        *,
+        odometry: Pose,
+        timestamp: float,
+        range_max: float = 81.0,
+        range_min: float = 0.0,
+        laser_offset: Pose = (0.0, 0.0, 0.0),
+    ) -> MatchResult:
+        """Matches one scan; a float64 ``ranges`` is read in place. The GIL is
+        released while matching."""
+    def process_record(self, record: Record) -> MatchResult:
+        """Matches one record of a log, exactly as ``qicp match`` does."""
+    def map_points(self) -> npt.NDArray[np.float64]:
+        """The reference's points (a boosted matcher's whole map) as an N×2 array (m)."""
+
+def read_carmen(path: StrPath, *, lenient: bool = False, max_beams: int = 10000) -> CarmenLog:
+    """Streams the laser records of a CARMEN log (plain or bzip2) in time order."""
+
+def evaluate_relations(
+    trajectory: Trajectory, relations_path: StrPath, *, max_dt: float = 0.1
+) -> dict:
+    """Freiburg benchmark scores (keys of ``qicp eval relations --json``)."""
+
+def ate(
+    estimate: Trajectory,
+    truth: Trajectory,
+    *,
+    max_dt: float = 0.1,
+    rpe_segment_m: float = 1.0,
+) -> dict:
+    """Origin-aligned ATE, RPE and final error (keys of ``qicp eval ate --json``)."""
+
+def read_tum(path: StrPath) -> npt.NDArray[np.float64]:
+    """A TUM trajectory as an N×4 array."""
+
+def write_tum(path: StrPath, trajectory: Trajectory) -> None:
+    """Writes a trajectory as TUM, as ``qicp match`` writes ``trajectory.tum``."""
+
+def matcher_names() -> list[str]:
+    """The matcher names the registry resolves."""

@@ -1,0 +1,168 @@
+"""The Python package gives the command line's answers: trajectories, figures and errors."""
+
+import json
+import math
+import threading
+
+import numpy as np
+import pytest
+
+import qicp
+from conftest import INTEL_RELATIONS, run_cli
+
+
+def first_records(log, n):
+    records = []
+    for r in qicp.read_carmen(log):
+        records.append(r)
+        if len(records) == n:
+            break
+    return records
+
+
+def test_intel_q_wsm_trajectory_is_the_command_lines_byte_for_byte(intel, qicp_bin, tmp_path):
+    cli = run_cli(qicp_bin, "match", intel, "--matcher", "q-wsm", "--out", tmp_path / "cli")
+    assert cli.returncode == 0, cli.stderr
+    m = qicp.Matcher("q-wsm")
+    traj = []
+    for r in qicp.read_carmen(intel):
+        res = m.process_record(r)
+        traj.append((res.timestamp, *res.pose))
+    qicp.write_tum(tmp_path / "py.tum", traj)
+    assert (tmp_path / "py.tum").read_bytes() == (tmp_path / "cli" / "trajectory.tum").read_bytes()
+    summary = json.loads((tmp_path / "cli" / "summary.json").read_text())
+    assert m.map_points().shape == (summary["map_points"], 2)
+
+    # The figures of the file are the command line's, to the last bit (TUM stores the heading
+    # as a quaternion, so the poses in memory score within rounding of them).
+    py = qicp.evaluate_relations(qicp.read_tum(tmp_path / "py.tum"), INTEL_RELATIONS)
+    ev = run_cli(qicp_bin, "eval", "relations", tmp_path / "py.tum", INTEL_RELATIONS, "--json")
+    assert ev.returncode == 0, ev.stderr
+    assert py == json.loads(ev.stdout)
+    in_memory = qicp.evaluate_relations(traj, INTEL_RELATIONS)
+    assert all(math.isclose(in_memory[k], py[k], rel_tol=1e-9) for k in py)
+    assert py["n"] > 2900 and py["trans_mean"] < 0.05
+
+
+def test_arrays_in_give_the_poses_of_records_in(intel):
+    records = first_records(intel, 400)
+    by_record, by_array = qicp.Matcher("q-wsm"), qicp.Matcher("q-wsm")
+    for i, r in enumerate(records):
+        ranges = r.ranges
+        if i % 2:
+            ranges = np.array(ranges[::-1])[::-1]  # a strided view: converted, same values
+        if i % 3 == 0:
+            ranges = list(ranges)  # a plain sequence is converted
+        a = by_record.process_record(r)
+        b = by_array.process(
+            ranges,
+            r.angle_min,
+            r.angle_increment,
+            odometry=r.odometry,
+            timestamp=r.timestamp,
+            range_max=r.range_max,
+            range_min=r.range_min,
+            laser_offset=r.laser_offset,
+        )
+        assert a.pose == b.pose
+        assert np.array_equal(a.covariance, b.covariance, equal_nan=True)
+    assert np.array_equal(by_record.map_points(), by_array.map_points())
+
+
+def test_float32_ranges_are_taken():
+    m = qicp.Matcher("wsm")
+    ranges = np.full(181, 2.0, dtype=np.float32)
+    r = m.process(ranges, -math.pi / 2, math.pi / 180, odometry=(1.0, 2.0, 0.5), timestamp=3.0)
+    assert r.fallback == "empty reference" and r.pose == (1.0, 2.0, 0.5)
+
+
+def test_results_carry_pose_covariance_and_checks(intel):
+    m = qicp.Matcher("q-wsm")
+    results = [m.process_record(r) for r in first_records(intel, 200)]
+    assert results[0].fallback == "empty reference"
+    assert math.isnan(results[0].residual)
+    matched = [r for r in results if r.fallback is None]
+    assert len(matched) > 190
+    for r in matched:
+        c = r.covariance
+        assert c.shape == (3, 3) and np.allclose(c, c.T) and np.all(np.linalg.eigvalsh(c) > 0)
+        assert 0 < r.residual < 0.1 and r.certainty > 0 and r.correspondences > 50
+    points = m.map_points()
+    assert points.ndim == 2 and points.shape[1] == 2 and len(points) > 1000
+
+
+def test_two_threads_match_as_one(intel):
+    records = first_records(intel, 300)
+    alone = qicp.Matcher("q-idc")
+    expected = [alone.process_record(r).pose for r in records]
+    got = {}
+
+    def work(name):
+        m = qicp.Matcher("q-idc")
+        got[name] = [m.process_record(r).pose for r in records]
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in ("a", "b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert got["a"] == expected and got["b"] == expected
+
+
+def test_sections_set_parameters_and_bad_ones_are_refused():
+    m = qicp.Matcher("q-wsm", icp={"max_dist_start": 0.7}, relevance={"tau_max": 0.2})
+    assert "max_dist_start = 0.7" in m.config_toml()
+    assert "tau_max = 0.2" in m.config_toml()
+    with pytest.raises(qicp.QicpError, match="max_dist_start"):
+        qicp.Matcher("q-wsm", icp={"max_dist_start": -1.0})
+    with pytest.raises(qicp.QicpError, match="no_such_key"):
+        qicp.Matcher("q-wsm", icp={"no_such_key": 1.0})
+    with pytest.raises(qicp.QicpError, match="as a dict"):
+        qicp.Matcher("q-wsm", icp=0.7)
+    assert {"q-wsm", "q-idc", "plicp", "q-plicp", "kd-wsm"} <= set(qicp.matcher_names())
+
+
+def test_errors_carry_the_command_lines_message(intel, qicp_bin, tmp_path):
+    with pytest.raises(qicp.QicpError) as err:
+        qicp.Matcher("no-such-matcher")
+    cli = run_cli(qicp_bin, "match", intel, "--matcher", "no-such-matcher", "--out", tmp_path)
+    assert cli.returncode != 0
+    assert f"Error: {err.value}" in cli.stderr
+
+    empty = tmp_path / "empty.clf"
+    empty.write_text("# nothing but a comment\n")
+    with pytest.raises(qicp.QicpError) as err:
+        list(qicp.read_carmen(empty))
+    cli = run_cli(qicp_bin, "match", empty, "--matcher", "wsm", "--out", tmp_path / "o")
+    assert cli.returncode != 0
+    assert str(err.value).splitlines()[0] in cli.stderr
+
+
+def test_bad_input_raises_instead_of_crashing(tmp_path):
+    bad = tmp_path / "bad.clf"
+    bad.write_text("FLASER 3 1.0 2.0\n")
+    with pytest.raises(qicp.QicpError, match="bad.clf:1: FLASER"):
+        list(qicp.read_carmen(bad))
+    with pytest.raises(qicp.QicpError):
+        qicp.read_carmen(tmp_path / "missing.clf")
+    m = qicp.Matcher("wsm")
+    with pytest.raises(qicp.QicpError, match="max_range"):
+        m.process([1.0, 2.0], -0.5, 0.1, odometry=(0, 0, 0), timestamp=0.0, range_max=math.inf)
+    with pytest.raises(qicp.QicpError, match="odometry"):
+        m.process([1.0, 2.0], -0.5, 0.1, odometry=(math.nan, 0, 0), timestamp=0.0)
+    with pytest.raises(qicp.QicpError, match="beams"):
+        m.process(np.ones(20_001), -0.5, 1e-4, odometry=(0, 0, 0), timestamp=0.0)
+    with pytest.raises(qicp.QicpError, match="4 columns"):
+        qicp.ate([(0.0, 1.0, 2.0)], [(0.0, 1.0, 2.0)])
+
+
+def test_ate_is_the_command_lines(intel, qicp_bin, tmp_path):
+    truth = [(float(t), math.cos(t / 10) * t, math.sin(t / 10) * t, t / 10) for t in range(200)]
+    est = [(t, x + 0.01 * math.sin(t), y, th + 0.001 * t) for t, x, y, th in truth]
+    qicp.write_tum(tmp_path / "est.tum", est)
+    qicp.write_tum(tmp_path / "truth.tum", truth)
+    cli = run_cli(qicp_bin, "eval", "ate", tmp_path / "est.tum", tmp_path / "truth.tum", "--json")
+    assert cli.returncode == 0, cli.stderr
+    py = qicp.ate(qicp.read_tum(tmp_path / "est.tum"), qicp.read_tum(tmp_path / "truth.tum"))
+    assert py == json.loads(cli.stdout)
+    assert qicp.ate(truth, truth)["ate_rmse_m"] == 0.0
