@@ -10,6 +10,7 @@ pub use qicp_eval as eval;
 /// Log readers and writers: the `qicp-io` crate.
 pub use qicp_io as logs;
 pub mod bridge_cmd;
+pub mod convert_cmd;
 pub mod eval_cmd;
 pub mod experiment;
 pub mod match_cmd;

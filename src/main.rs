@@ -1,6 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-use qicp::{bench, bridge_cmd, eval_cmd, experiment, match_cmd, sim_cmd, sweep};
+use qicp::{bench, bridge_cmd, convert_cmd, eval_cmd, experiment, match_cmd, sim_cmd, sweep};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -18,10 +18,12 @@ enum Command {
     /// Benchmarks (print a table, or JSON with --json).
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Convert a CARMEN log into a ROS 2 bag (MCAP: LaserScan, Odometry, /tf).
+    Convert(convert_cmd::ConvertArgs),
     /// Evaluate trajectories.
     #[command(subcommand)]
     Eval(eval_cmd::EvalCommand),
-    /// Match every scan of a CARMEN log with one matcher; write trajectory, per-scan figures
+    /// Match every scan of a CARMEN log or ROS 2 bag with one matcher; write trajectory, per-scan figures
     /// and a summary.
     Match(match_cmd::MatchArgs),
     /// List the registered algorithms (with their parameters' defaults, ranges and docs),
@@ -43,6 +45,7 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Bench(c) => bench::run(c),
+        Command::Convert(a) => convert_cmd::run(a),
         Command::Eval(c) => eval_cmd::run(c),
         Command::Match(a) => match_cmd::run(a),
         Command::Matchers => {

@@ -1,9 +1,10 @@
 //! `qicp match LOG --matcher KIND [--config FILE] --out DIR`.
 
 use crate::eval::{RelationProbe, evaluate_relations};
-use crate::logs::LogError;
-use crate::logs::carmen::{CarmenOptions, CarmenReader};
+use crate::logs::carmen::CarmenOptions;
 use crate::logs::relations::read_relations;
+use crate::logs::rosbag::{BagLayout, BagOptions, BagWriter, OdometrySource};
+use crate::logs::{LogOptions, LogReader};
 use crate::matching::{MatchLoop, RunWriter, progress_spinner};
 use anyhow::{Context, Result, bail};
 use qicp_matchers::MatcherConfig;
@@ -12,7 +13,8 @@ use std::path::PathBuf;
 /// Arguments of `qicp match`.
 #[derive(Debug, clap::Args)]
 pub struct MatchArgs {
-    /// CARMEN log (plain or .bz2); not with --subscribe.
+    /// CARMEN log (plain or .bz2) or ROS 2 bag (MCAP; see --scan-topic); not with
+    /// --subscribe.
     #[arg(required_unless_present = "subscribe")]
     pub log: Option<PathBuf>,
     /// Matcher kind: a composed name such as idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm
@@ -37,9 +39,95 @@ pub struct MatchArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Where a ROS 2 bag's scans and odometry are.
+    #[command(flatten)]
+    pub bag: BagArgs,
+    /// Also write a ROS 2 bag (MCAP): the scans, the odometry and the estimated poses
+    /// (`nav_msgs/msg/Odometry` on /qicp/odom and the /tf transform map -> odom), to play in
+    /// Foxglove or RViz beside the input.
+    #[arg(long, value_name = "FILE")]
+    pub out_mcap: Option<PathBuf>,
     /// Take the scans from the iceoryx2 bridge instead of a log.
     #[command(flatten)]
     pub bridge: crate::bridge_cmd::SubscribeArgs,
+}
+
+/// Where a ROS 2 bag's scans and odometry are (ignored for CARMEN logs).
+#[derive(Debug, Clone, clap::Args)]
+pub struct BagArgs {
+    /// The `sensor_msgs/msg/LaserScan` topic of a bag.
+    #[arg(long, default_value = "/scan")]
+    pub scan_topic: String,
+    /// The `nav_msgs/msg/Odometry` topic of a bag.
+    #[arg(long, default_value = "/odom", conflicts_with = "odom_frame")]
+    pub odom_topic: String,
+    /// Take odometry from /tf instead: the transform from this frame to --base-frame.
+    #[arg(long)]
+    pub odom_frame: Option<String>,
+    /// The robot's frame, with --odom-frame.
+    #[arg(long, default_value = "base_link", requires = "odom_frame")]
+    pub base_frame: String,
+}
+
+impl BagArgs {
+    /// The reader options these arguments give, with the CARMEN ones.
+    #[must_use]
+    pub fn log_options(&self, carmen: CarmenOptions) -> LogOptions {
+        let odometry = match &self.odom_frame {
+            Some(odom_frame) => OdometrySource::Tf {
+                odom_frame: odom_frame.clone(),
+                base_frame: self.base_frame.clone(),
+            },
+            None => OdometrySource::Topic(self.odom_topic.clone()),
+        };
+        let max_beams = carmen.max_beams;
+        LogOptions {
+            carmen,
+            bag: BagOptions {
+                max_beams,
+                ..BagOptions::new(self.scan_topic.clone(), odometry)
+            },
+        }
+    }
+}
+
+/// A bag written under a temporary name beside its path and renamed into place when complete.
+struct BagOutput {
+    path: PathBuf,
+    writer: BagWriter<std::io::BufWriter<tempfile::NamedTempFile>>,
+}
+
+impl BagOutput {
+    fn create(path: &std::path::Path) -> Result<Self> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => std::path::Path::new("."),
+        };
+        let file = crate::matching::temp_builder(".qicp-bag.")
+            .tempfile_in(dir)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let writer = BagWriter::new(
+            std::io::BufWriter::new(file),
+            &path.display().to_string(),
+            BagLayout::default(),
+        )?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            writer,
+        })
+    }
+
+    fn commit(self) -> Result<()> {
+        let file = self.writer.finish()?;
+        let file = file
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        file.persist(&self.path)
+            .map_err(|e| e.error)
+            .with_context(|| format!("renaming into {}", self.path.display()))?;
+        Ok(())
+    }
 }
 
 /// Loads the matcher config: a file, a kind, or both (the kind overrides the file's).
@@ -103,13 +191,18 @@ pub fn run(args: MatchArgs) -> Result<()> {
         .as_ref()
         .map(|r| RelationProbe::new(r, RELATIONS_MAX_DT))
         .transpose()?;
-    let options = CarmenOptions {
+    let options = args.bag.log_options(CarmenOptions {
         lenient: args.lenient,
         max_beams: args.max_beams,
         ..CarmenOptions::default()
-    };
-    let mut reader = CarmenReader::open(log_path, &options)?;
+    });
+    let mut reader = LogReader::open(log_path, &options)?;
     let mut writer = RunWriter::create(out)?;
+    let mut bag = args
+        .out_mcap
+        .as_deref()
+        .map(BagOutput::create)
+        .transpose()?;
     let mut matcher = MatchLoop::new(&config)?;
 
     // Scan by scan: memory holds the matcher's map and the reorder window, not the log.
@@ -118,20 +211,25 @@ pub fn run(args: MatchArgs) -> Result<()> {
         let record = record?;
         let (estimate, row) = matcher.push(&record);
         writer.push(record.timestamp(), &estimate.pose, &row)?;
+        if let Some(bag) = &mut bag {
+            bag.writer.record(&record)?;
+            bag.writer
+                .estimate(record.timestamp(), estimate.pose, record.odometry)?;
+        }
         if let Some(probe) = &mut probe {
             probe.push(record.timestamp(), estimate.pose)?;
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
-    reader.info.warn(log_path);
-    if reader.info.records == 0 {
-        return Err(LogError::empty(log_path, &reader.info).into());
+    reader.warn(log_path);
+    if reader.records() == 0 {
+        return Err(reader.empty(log_path).into());
     }
 
     let mut summary = serde_json::to_value(matcher.summary())?;
-    summary["skipped_lines"] = reader.info.skipped_lines.into();
-    summary["late_lines"] = reader.info.late.into();
+    summary["skipped_lines"] = reader.skipped_lines().into();
+    summary["late_lines"] = reader.dropped().into();
     let mut unscored = None;
     if let (Some(relations), Some(probe), Some(path)) = (&relations, &probe, &args.relations) {
         let report = evaluate_relations(&probe.trajectory(), relations, RELATIONS_MAX_DT)?;
@@ -141,13 +239,16 @@ pub fn run(args: MatchArgs) -> Result<()> {
                  relations, log from {:.3} to {:.3} s): is it the log's relations file?",
                 path.display(),
                 relations.len(),
-                reader.info.span.map_or(f64::NAN, |s| s.0),
-                reader.info.span.map_or(f64::NAN, |s| s.1),
+                reader.span().map_or(f64::NAN, |s| s.0),
+                reader.span().map_or(f64::NAN, |s| s.1),
             ));
         }
         summary["relations"] = serde_json::to_value(report)?;
     }
     let text = serde_json::to_string_pretty(&summary)?;
+    if let Some(bag) = bag {
+        bag.commit()?;
+    }
     writer.commit(&config, Some(&text))?;
     if args.json {
         println!("{text}");

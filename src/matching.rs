@@ -510,7 +510,7 @@ impl RunWriter {
 
 /// Temporary files named `PREFIXXXXXXX`, with the permissions an ordinary file would get
 /// (0644 less the umask), not tempfile's private 0600: they become the outputs.
-fn temp_builder(prefix: &str) -> tempfile::Builder<'_, 'static> {
+pub fn temp_builder(prefix: &str) -> tempfile::Builder<'_, 'static> {
     let mut builder = tempfile::Builder::new();
     builder.prefix(prefix).permissions({
         use std::os::unix::fs::PermissionsExt;

@@ -2,7 +2,7 @@
 //!
 //! Where records and trajectories come from and go to: CARMEN logs (`carmen`, read whole or
 //! streamed in bounded memory), TUM trajectories (`tum`), Freiburg benchmark relations
-//! (`relations`). A [`RecordSource`] yields records in time order: the streaming CARMEN
+//! (`relations`), ROS 2 bags in MCAP storage (`rosbag`, read streamed and written). A [`RecordSource`] yields records in time order: the streaming CARMEN
 //! reader here and the simulator (`qicp-sim`) alike (the bridge subscriber is driven by its
 //! transport's callbacks instead).
 //!
@@ -13,7 +13,11 @@
 
 pub mod carmen;
 pub mod relations;
+pub mod rosbag;
+mod source;
 pub mod tum;
+
+pub use source::{LogOptions, LogReader};
 
 /// Records in time order, one at a time: what a matcher is fed.
 ///
@@ -70,6 +74,14 @@ pub enum LogError {
         path: String,
         /// What was read instead ([`carmen::LogInfo::report`]).
         report: String,
+    },
+    /// A ROS 2 bag cannot be read or written, or does not hold what was asked for.
+    #[error("{path}: {why}")]
+    Bag {
+        /// The bag.
+        path: String,
+        /// What is wrong.
+        why: String,
     },
     /// A reader option is not usable (e.g. a negative field of view).
     #[error("option `{name}`: {why}")]

@@ -1,0 +1,117 @@
+//! One way in for every log format: a CARMEN log (plain or bzip2) or a ROS 2 bag (MCAP), told
+//! apart by the file's first bytes.
+
+use crate::LogError;
+use crate::carmen::{CarmenOptions, CarmenReader};
+use crate::rosbag::{BagOptions, BagReader, OdometrySource, is_mcap};
+use qicp_core::Record;
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+
+/// How to read a log of either format.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogOptions {
+    /// For CARMEN logs.
+    pub carmen: CarmenOptions,
+    /// For ROS 2 bags. Default: scans on `/scan`, odometry on `/odom`.
+    pub bag: BagOptions,
+}
+
+impl Default for LogOptions {
+    fn default() -> Self {
+        Self {
+            carmen: CarmenOptions::default(),
+            bag: BagOptions::new("/scan", OdometrySource::Topic("/odom".into())),
+        }
+    }
+}
+
+/// The records of a log, streamed in time order, whatever its format.
+#[derive(Debug)]
+pub enum LogReader {
+    /// A CARMEN log.
+    Carmen(Box<CarmenReader<Box<dyn BufRead + Send>>>),
+    /// A rosbag2 MCAP file.
+    Bag(Box<BagReader<std::io::BufReader<std::fs::File>>>),
+}
+
+impl LogReader {
+    /// Opens `path` as a ROS 2 bag when it starts with MCAP's magic bytes, else as CARMEN.
+    pub fn open(path: &Path, opts: &LogOptions) -> Result<Self, LogError> {
+        if is_mcap(path) {
+            Ok(Self::Bag(Box::new(BagReader::open(path, &opts.bag)?)))
+        } else {
+            Ok(Self::Carmen(Box::new(CarmenReader::open(
+                path,
+                &opts.carmen,
+            )?)))
+        }
+    }
+
+    /// Records delivered so far.
+    #[must_use]
+    pub fn records(&self) -> usize {
+        match self {
+            Self::Carmen(r) => r.info.records,
+            Self::Bag(r) => r.info().records,
+        }
+    }
+
+    /// Time of the first and of the last record delivered (s).
+    #[must_use]
+    pub fn span(&self) -> Option<(f64, f64)> {
+        match self {
+            Self::Carmen(r) => r.info.span,
+            Self::Bag(r) => r.info().span,
+        }
+    }
+
+    /// Lines skipped as malformed (CARMEN with `lenient`; 0 for bags).
+    #[must_use]
+    pub fn skipped_lines(&self) -> usize {
+        match self {
+            Self::Carmen(r) => r.info.skipped_lines,
+            Self::Bag(_) => 0,
+        }
+    }
+
+    /// Records dropped: CARMEN lines too far out of time order, bag scans without odometry.
+    #[must_use]
+    pub fn dropped(&self) -> usize {
+        match self {
+            Self::Carmen(r) => r.info.late,
+            Self::Bag(r) => r.info().without_odometry,
+        }
+    }
+
+    /// Prints the warnings of the read on stderr (skips and drops).
+    pub fn warn(&self, path: &Path) {
+        match self {
+            Self::Carmen(r) => r.info.warn(path),
+            Self::Bag(r) => r.info().warn(path),
+        }
+    }
+
+    /// The error for a log that gave no record (a bag reports its own at its end).
+    #[must_use]
+    pub fn empty(&self, path: &Path) -> LogError {
+        match self {
+            Self::Carmen(r) => LogError::empty(path, &r.info),
+            Self::Bag(r) => LogError::Bag {
+                path: PathBuf::from(path).display().to_string(),
+                why: format!("no laser records; topics: {}", r.info().topic_list()),
+            },
+        }
+    }
+}
+
+impl Iterator for LogReader {
+    type Item = Result<Record, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        match self {
+            Self::Carmen(r) => r.next(),
+            Self::Bag(r) => r.next(),
+        }
+    }
+}

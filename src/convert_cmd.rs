@@ -1,0 +1,83 @@
+//! `qicp convert LOG OUT.mcap`: a CARMEN log as a ROS 2 bag (MCAP storage), for ROS tools
+//! and for `qicp match` on bags.
+
+use crate::logs::carmen::{CarmenOptions, DEFAULT_MAX_BEAMS};
+use crate::logs::rosbag::{BagLayout, BagWriter};
+use crate::logs::{LogOptions, LogReader};
+use crate::matching::progress_spinner;
+use anyhow::{Context, Result, bail};
+use std::path::PathBuf;
+
+/// Arguments of `qicp convert`.
+#[derive(Debug, clap::Args)]
+pub struct ConvertArgs {
+    /// CARMEN log (plain or .bz2).
+    pub log: PathBuf,
+    /// The bag to write (MCAP): `sensor_msgs/msg/LaserScan` on /scan (frame `laser`, ranges as
+    /// float32), `nav_msgs/msg/Odometry` on /odom (odom -> base_link), the same transform on
+    /// /tf and the laser's pose on the robot on /tf_static.
+    pub out: PathBuf,
+    /// Skip and count malformed log lines instead of failing.
+    #[arg(long)]
+    pub lenient: bool,
+    /// Readings a laser line may announce at most; longer lines are malformed.
+    #[arg(long, default_value_t = DEFAULT_MAX_BEAMS)]
+    pub max_beams: usize,
+    /// Convert at most this many records (all by default).
+    #[arg(long)]
+    pub max_records: Option<usize>,
+}
+
+/// Runs the command.
+pub fn run(args: ConvertArgs) -> Result<()> {
+    let options = LogOptions {
+        carmen: CarmenOptions {
+            lenient: args.lenient,
+            max_beams: args.max_beams,
+            ..CarmenOptions::default()
+        },
+        ..LogOptions::default()
+    };
+    let mut reader = LogReader::open(&args.log, &options)?;
+    if matches!(reader, LogReader::Bag(_)) {
+        bail!("{} is already a bag (MCAP)", args.log.display());
+    }
+    let dir = match args.out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => std::path::Path::new("."),
+    };
+    let file = crate::matching::temp_builder(".qicp-bag.")
+        .tempfile_in(dir)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    let mut bag = BagWriter::new(
+        std::io::BufWriter::new(file),
+        &args.out.display().to_string(),
+        BagLayout::default(),
+    )?;
+    let limit = args.max_records.unwrap_or(usize::MAX);
+    let bar = progress_spinner("convert");
+    for record in reader.by_ref().take(limit) {
+        bag.record(&record?)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    reader.warn(&args.log);
+    if reader.records() == 0 {
+        return Err(reader.empty(&args.log).into());
+    }
+    let file = bag
+        .finish()?
+        .into_inner()
+        .map_err(|e| e.into_error())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    file.persist(&args.out)
+        .map_err(|e| e.error)
+        .with_context(|| format!("renaming into {}", args.out.display()))?;
+    eprintln!(
+        "wrote {} records of {} to {}",
+        reader.records(),
+        args.log.display(),
+        args.out.display()
+    );
+    Ok(())
+}
