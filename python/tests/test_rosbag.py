@@ -4,7 +4,6 @@ those packages."""
 
 import itertools
 import math
-import subprocess
 
 import mcap_ros2.reader as mcap_ros2_reader
 import mcap_ros2.writer as mcap_ros2_writer

@@ -48,9 +48,23 @@ pub struct SourceConfig {
     /// A drive configuration for the simulator (`configs/worlds/*.toml`). Default: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sim: Option<PathBuf>,
-    /// A CARMEN log (plain or `.bz2`). Default: none.
+    /// A CARMEN log (plain or `.bz2`) or a ROS 2 bag (MCAP, told by its first bytes; see
+    /// `scan_topic`). Default: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub log: Option<PathBuf>,
+    /// The `sensor_msgs/msg/LaserScan` topic of a bag. Default `/scan`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan_topic: Option<String>,
+    /// The `nav_msgs/msg/Odometry` topic of a bag. Default `/odom`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odom_topic: Option<String>,
+    /// Take a bag's odometry from /tf instead: the transform from this frame to `base_frame`.
+    /// Default: none (the odometry topic).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odom_frame: Option<String>,
+    /// The robot's frame, with `odom_frame`. Default `base_link`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_frame: Option<String>,
     /// Freiburg benchmark relations of the log. Default: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relations: Option<PathBuf>,
@@ -74,6 +88,45 @@ pub struct SourceConfig {
 }
 
 impl SourceConfig {
+    /// The ground truth file of a log, read; `None` when not given.
+    pub fn truth(&self) -> Result<Option<Vec<Stamped>>> {
+        self.groundtruth
+            .as_ref()
+            .map(|p| {
+                crate::eval::load_trajectory(p, crate::eval::LogPoses::Truth)
+                    .with_context(|| format!("reading ground truth {}", p.display()))
+            })
+            .transpose()
+    }
+
+    /// How to read the log: CARMEN with `lenient`, a bag with the topics and frames given.
+    #[must_use]
+    pub fn log_options(&self) -> crate::logs::LogOptions {
+        use crate::logs::rosbag::{BagOptions, OdometrySource};
+        let odometry = match &self.odom_frame {
+            Some(odom_frame) => OdometrySource::Tf {
+                odom_frame: odom_frame.clone(),
+                base_frame: self
+                    .base_frame
+                    .clone()
+                    .unwrap_or_else(|| "base_link".into()),
+            },
+            None => {
+                OdometrySource::Topic(self.odom_topic.clone().unwrap_or_else(|| "/odom".into()))
+            }
+        };
+        crate::logs::LogOptions {
+            carmen: CarmenOptions {
+                lenient: self.lenient,
+                ..CarmenOptions::default()
+            },
+            bag: BagOptions::new(
+                self.scan_topic.clone().unwrap_or_else(|| "/scan".into()),
+                odometry,
+            ),
+        }
+    }
+
     /// The drive of a `sim` source at `sim`, with the source's seeds and length applied.
     pub fn drive(&self, sim: &Path) -> Result<qicp_sim::SimConfig> {
         let mut cfg = qicp_sim::SimConfig::load(sim)
@@ -182,6 +235,10 @@ impl ExperimentConfig {
                     ("source.relations", s.relations.is_some()),
                     ("source.groundtruth", s.groundtruth.is_some()),
                     ("source.lenient", s.lenient),
+                    ("source.scan_topic", s.scan_topic.is_some()),
+                    ("source.odom_topic", s.odom_topic.is_some()),
+                    ("source.odom_frame", s.odom_frame.is_some()),
+                    ("source.base_frame", s.base_frame.is_some()),
                 ] {
                     if set {
                         return Err(invalid(
@@ -192,6 +249,15 @@ impl ExperimentConfig {
                 }
             }
             (None, Some(_)) => {
+                if s.odom_topic.is_some() && s.odom_frame.is_some() {
+                    return Err(invalid(
+                        "source.odom_frame",
+                        "odometry from /tf (odom_frame) or from a topic (odom_topic), not both",
+                    ));
+                }
+                if s.base_frame.is_some() && s.odom_frame.is_none() {
+                    return Err(invalid("source.base_frame", "only with `odom_frame`"));
+                }
                 for (key, set) in [
                     ("source.seed", s.seed.is_some()),
                     ("source.world_seed", s.world_seed.is_some()),

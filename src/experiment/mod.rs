@@ -4,7 +4,9 @@
 //! ```toml
 //! [source]
 //! sim = "worlds/park.toml"     # a drive config (relative to this file), or:
-//! # log = "../../shared/data/intel/intel.clf.bz2"   # a CARMEN log (plain or .bz2)
+//! # log = "../../shared/data/intel/intel.clf.bz2"   # a CARMEN log (plain or .bz2) or a ROS 2
+//! #                            # bag (MCAP): scan_topic = "/scan", odom_topic = "/odom" or
+//! #                            # odom_frame = "odom" with base_frame = "base_link"
 //! # relations = "../../shared/data/intel/intel.relations"  # Freiburg relations (log only)
 //! # groundtruth = "truth.tum"  # TUM file or CARMEN log with TRUEPOS (log only)
 //! # max_scans = 100            # only the first scans (default: all)
@@ -38,9 +40,7 @@
 //! layout or one noise draw can be lucky or unlucky; the medians are what a method should be
 //! judged by. (The corridor's layout is fixed; there only the noise changes.)
 
-use crate::eval::{
-    AteOptions, AteReport, LogPoses, RelationsReport, evaluate_ate, evaluate_relations,
-};
+use crate::eval::{AteOptions, AteReport, RelationsReport, evaluate_ate, evaluate_relations};
 use crate::logs::carmen::{CarmenOptions, read_carmen};
 use crate::logs::relations::{Relation, read_relations};
 use crate::logs::tum::{Stamped, write_tum};

@@ -23,6 +23,16 @@ impl Source {
             let (records, _, _) = qicp_sim::Simulation::run(cfg)
                 .with_context(|| format!("simulating {}", sim.display()))?;
             (format!("sim:{}", sim.display()), records, None)
+        } else if let Some(log) = c.log.as_ref().filter(|l| crate::logs::rosbag::is_mcap(l)) {
+            // A bag streams; only the scans the run uses are kept.
+            let mut reader = crate::logs::LogReader::open(log, &c.log_options())?;
+            let records = reader
+                .by_ref()
+                .take(c.max_scans.unwrap_or(usize::MAX))
+                .collect::<Result<Vec<_>, _>>()
+                .with_context(|| format!("reading {}", log.display()))?;
+            reader.warn(log);
+            (format!("bag:{}", log.display()), records, c.truth()?)
         } else if let Some(log) = &c.log {
             let opts = CarmenOptions {
                 lenient: c.lenient,
@@ -37,14 +47,7 @@ impl Source {
                     log.display()
                 );
             }
-            let truth = match &c.groundtruth {
-                Some(p) => Some(
-                    crate::eval::load_trajectory(p, LogPoses::Truth)
-                        .with_context(|| format!("reading ground truth {}", p.display()))?,
-                ),
-                None => None,
-            };
-            (format!("log:{}", log.display()), read.records, truth)
+            (format!("log:{}", log.display()), read.records, c.truth()?)
         } else {
             anyhow::bail!("`source`: give `sim` or `log`");
         };
