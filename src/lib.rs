@@ -14,10 +14,13 @@ pub mod convert_cmd;
 pub mod eval_cmd;
 pub mod experiment;
 pub mod match_cmd;
-pub mod matching;
+/// The match loop and its outputs: the `qicp-runner` crate's.
+pub use qicp_runner::matching;
 pub mod plots;
 pub mod sim_cmd;
-pub mod sweep;
+/// The robustness sweep: the `qicp-runner` crate's.
+pub use qicp_runner::sweep;
+pub mod sweep_cmd;
 
 use qicp_matchers::Registry;
 use std::sync::LazyLock;

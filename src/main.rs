@@ -1,6 +1,6 @@
 //! `qicp`: the command-line front end of the qicp scan-matching framework.
 
-use qicp::{bench, bridge_cmd, convert_cmd, eval_cmd, experiment, match_cmd, sim_cmd, sweep};
+use qicp::{bench, bridge_cmd, convert_cmd, eval_cmd, experiment, match_cmd, sim_cmd, sweep_cmd};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -38,7 +38,7 @@ enum Command {
     Sim(sim_cmd::SimArgs),
     /// Run a matcher on a log as configured and under fixed input and parameter variants,
     /// score every run with relations and report how much each variant costs.
-    Sweep(sweep::SweepArgs),
+    Sweep(sweep_cmd::SweepArgs),
 }
 
 fn main() -> Result<()> {
@@ -55,6 +55,6 @@ fn main() -> Result<()> {
         Command::Replay(a) => bridge_cmd::run_replay(a),
         Command::Run(a) => experiment::run(a),
         Command::Sim(a) => sim_cmd::run(a),
-        Command::Sweep(a) => sweep::run(a),
+        Command::Sweep(a) => sweep_cmd::run(a),
     }
 }

@@ -23,6 +23,9 @@ from ._qicp import (
     matcher_names,
     read_carmen,
     read_tum,
+    sweep_report,
+    sweep_run,
+    sweep_variants,
     write_tum,
 )
 
@@ -38,5 +41,8 @@ __all__ = [
     "matcher_names",
     "read_carmen",
     "read_tum",
+    "sweep_report",
+    "sweep_run",
+    "sweep_variants",
     "write_tum",
 ]

@@ -145,3 +145,31 @@ def write_tum(path: StrPath, trajectory: Trajectory) -> None:
 
 def matcher_names() -> list[str]:
     """The matcher names the registry resolves."""
+
+def sweep_variants(matcher: str = "q-wsm", *, config: Optional[StrPath] = None) -> list[str]:
+    """The variants ``qicp sweep`` runs for a matcher, in report order (the default aside)."""
+
+def sweep_run(
+    log: StrPath,
+    relations: StrPath,
+    variant: str = "default",
+    *,
+    matcher: str = "q-wsm",
+    config: Optional[StrPath] = None,
+    scans: Optional[int] = None,
+    lenient: bool = False,
+) -> dict:
+    """One run of ``qicp sweep``: its figures (the keys of a variant in ``--json``)."""
+
+def sweep_report(
+    log: StrPath,
+    relations: StrPath,
+    results: Sequence[Tuple[str, Union[dict, str]]],
+    *,
+    matcher: str = "q-wsm",
+    config: Optional[StrPath] = None,
+    scans: Optional[int] = None,
+    lenient: bool = False,
+) -> str:
+    """The JSON report of ``qicp sweep --json`` from every run's figures or failure message,
+    the default first."""

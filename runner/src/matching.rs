@@ -1,9 +1,9 @@
 //! Running a matcher over a sequence of records: the loop behind `qicp match`, `qicp run`
 //! and the bridge's matcher process.
 
-use crate::logs::tum::{Stamped, write_tum_pose};
 use anyhow::{Context, Result};
 use qicp_core::{Fallback, Record};
+use qicp_io::tum::{Stamped, write_tum_pose};
 use qicp_matchers::{Check, Estimate, MatcherConfig, Odometry};
 use serde::Serialize;
 use std::io::Write;

@@ -1,4 +1,4 @@
-//! `qicp sweep LOG --matcher KIND --relations FILE`: how robust a matcher is to its input and
+//! Robustness sweeps (`qicp sweep LOG --matcher KIND --relations FILE`): how robust a matcher is to its input and
 //! to its parameters (issue 12).
 //!
 //! The matcher runs on the log once as configured ("default") and once per variant, and every
@@ -15,19 +15,19 @@
 //! sweep reports the worst and the median ratio. The runs are spread over worker threads; each
 //! run is deterministic, so the figures (all but the wall times) do not depend on `--jobs`.
 
-use crate::eval::{RelationError, evaluate_relations, relation_errors};
-use crate::logs::relations::{Relation, read_relations};
-use crate::logs::tum::Stamped;
 use crate::matching::run_matcher;
 use anyhow::{Context, Result, bail};
 use qicp_core::{BeamGeometry, BeamStatus, Pose2, Record, Scan, ScanError};
+use qicp_eval::{RelationError, evaluate_relations, relation_errors};
+use qicp_io::relations::{Relation, read_relations};
+use qicp_io::tum::Stamped;
 use qicp_matchers::MatcherConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 use std::borrow::Cow;
 use std::num::NonZeroUsize;
-use std::path::PathBuf;
+use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
@@ -62,37 +62,6 @@ pub const ODOM_BIAS_THETA_PER_M: f64 = std::f64::consts::PI / 180.0;
 pub const RANGE_NOISE_SIGMA: f64 = 0.01;
 /// Maximum range (m) of the `max-range-10` variant.
 pub const CAPPED_MAX_RANGE: f64 = 10.0;
-
-/// Arguments of `qicp sweep`.
-#[derive(Debug, clap::Args)]
-pub struct SweepArgs {
-    /// CARMEN log (plain or .bz2).
-    pub log: PathBuf,
-    /// Matcher kind: idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm. Overrides the config's kind.
-    #[arg(long)]
-    pub matcher: Option<String>,
-    /// TOML file with a `[matcher]` table: the default configuration.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Freiburg relations file every run is scored with.
-    #[arg(long)]
-    pub relations: PathBuf,
-    /// Print the report as JSON on stdout (progress stays on stderr).
-    #[arg(long)]
-    pub json: bool,
-    /// Runs at a time (default: the available cores).
-    #[arg(long)]
-    pub jobs: Option<NonZeroUsize>,
-    /// Use only the first N records of the log.
-    #[arg(long)]
-    pub scans: Option<NonZeroUsize>,
-    /// Run only these variants (comma-separated names; the default always runs).
-    #[arg(long, value_delimiter = ',')]
-    pub variants: Option<Vec<String>>,
-    /// Skip and count malformed log lines instead of failing.
-    #[arg(long)]
-    pub lenient: bool,
-}
 
 /// One variant's line of the report.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -147,6 +116,14 @@ fn median(values: &[f64]) -> Option<f64> {
     }
 }
 
+/// The runs of a sweep: the default, then one per variant, in report order.
+#[must_use]
+pub fn plan(config: &MatcherConfig, variants: &[Variant]) -> Vec<Job> {
+    std::iter::once(Job::default_run(config))
+        .chain(variants.iter().map(|v| Job::variant(config, v)))
+        .collect()
+}
+
 /// Sweeps `variants` of the matcher `config` over `records`, scored with `relations`, with
 /// `jobs` runs at a time; `progress` hears of each run as it finishes (name, result, time).
 pub fn sweep(
@@ -157,30 +134,7 @@ pub fn sweep(
     jobs: usize,
     mut progress: impl FnMut(&str, &Result<RunFigures, String>, Duration),
 ) -> Result<(RunFigures, Vec<VariantReport>)> {
-    let default = Job {
-        name: "default".to_string(),
-        input: None,
-        config: Ok(config.clone()),
-    };
-    let planned = variants.iter().map(|v| match &v.perturbation {
-        Perturbation::Input(i) => Job {
-            name: v.name.clone(),
-            input: Some(*i),
-            config: Ok(config.clone()),
-        },
-        Perturbation::Parameter { key, factor } => Job {
-            name: v.name.clone(),
-            input: None,
-            config: config
-                .scaled(key, *factor)
-                .map(|mut c| {
-                    c.fill_defaults();
-                    c
-                })
-                .map_err(|e| format!("invalid configuration: {e}")),
-        },
-    });
-    let jobs_list: Vec<Job> = std::iter::once(default).chain(planned).collect();
+    let jobs_list = plan(config, variants);
     let mut results = run_parallel(
         &jobs_list,
         jobs,
@@ -201,18 +155,7 @@ pub fn sweep(
         .iter()
         .skip(1)
         .zip(results)
-        .map(|(job, result)| {
-            let (figures, error) = match result {
-                Ok(f) => (Some(f), None),
-                Err(e) => (None, Some(e)),
-            };
-            VariantReport {
-                name: job.name.clone(),
-                ratio: figures.as_ref().map(|f| f.trans_mean / default.trans_mean),
-                figures,
-                error,
-            }
-        })
+        .map(|(job, result)| variant_report(&job.name, result, &default))
         .collect();
     Ok((default, reports))
 }
@@ -326,77 +269,95 @@ pub fn table(report: &SweepReport) -> String {
     out
 }
 
-/// Runs the command.
-pub fn run(args: SweepArgs) -> Result<()> {
-    // Everything that can be refused is checked before the log is read and before matching.
-    let config = crate::match_cmd::load_config(args.config.as_ref(), args.matcher.as_deref())?;
-    let relations = read_relations(&args.relations)
-        .with_context(|| format!("reading relations {}", args.relations.display()))?;
-    let relations_name = args.relations.display().to_string();
-    let all = all_variants(&config);
-    let variants = match &args.variants {
-        Some(names) => select_variants(all, names)?,
-        None => all,
-    };
-    let log = crate::logs::carmen::load_for_command(&args.log, args.lenient)?;
-    let mut records = log.records;
-    if let Some(n) = args.scans {
-        records.truncate(n.get());
+/// A sweep's inputs, read and checked: the log's first records and the relations.
+#[derive(Debug)]
+pub struct SweepInput {
+    /// The log, as named in reports.
+    pub log: String,
+    /// The records the runs use.
+    pub records: Vec<Record>,
+    /// The relations every run is scored with.
+    pub relations: Vec<Relation>,
+}
+
+impl SweepInput {
+    /// Reads the relations, then the CARMEN log (its first `scans` records; `lenient` skips
+    /// malformed lines), and checks that some relation falls within those records, so that a
+    /// relations file of another log fails before any matching.
+    pub fn load(
+        log: &Path,
+        relations: &Path,
+        scans: Option<NonZeroUsize>,
+        lenient: bool,
+    ) -> Result<Self> {
+        let relations_name = relations.display().to_string();
+        let relations = read_relations(relations)
+            .with_context(|| format!("reading relations {relations_name}"))?;
+        let mut records = qicp_io::carmen::load_for_command(log, lenient)?.records;
+        if let Some(n) = scans {
+            records.truncate(n.get());
+        }
+        if records.is_empty() {
+            bail!("{} has no laser records", log.display());
+        }
+        check_relations_cover(&records, &relations, &relations_name)?;
+        Ok(Self {
+            log: log.display().to_string(),
+            records,
+            relations,
+        })
     }
-    if records.is_empty() {
-        bail!("{} has no laser records", args.log.display());
-    }
-    check_relations_cover(&records, &relations, &relations_name)?;
-    let jobs = args
-        .jobs
-        .or_else(|| std::thread::available_parallelism().ok())
-        .map_or(1, NonZeroUsize::get);
-    eprintln!(
-        "sweeping {} on {} scans: default + {} variants, {jobs} at a time",
-        config.kind(),
-        records.len(),
-        variants.len()
-    );
-    let (default, reports) = sweep(
-        &records,
-        &relations,
-        &config,
-        &variants,
-        jobs,
-        |name, result, elapsed| match result {
-            Ok(f) => eprintln!(
-                "variant {name} done in {:.1} s (trans_mean {} m)",
-                elapsed.as_secs_f64(),
-                fmt_f(f.trans_mean, 4)
-            ),
-            Err(e) => eprintln!("variant {name} failed: {e}"),
-        },
-    )?;
-    let ratios: Vec<(f64, &str)> = reports
+}
+
+/// The report of a sweep of `config` on `input`: the default run, the variants, the worst and
+/// the median ratio.
+#[must_use]
+pub fn report(
+    input: &SweepInput,
+    config: &MatcherConfig,
+    default: RunFigures,
+    variants: Vec<VariantReport>,
+) -> SweepReport {
+    let ratios: Vec<(f64, &str)> = variants
         .iter()
         .filter_map(|v| v.ratio.map(|r| (r, v.name.as_str())))
         .filter(|(r, _)| !r.is_nan())
         .collect();
     let worst = ratios.iter().copied().max_by(|a, b| a.0.total_cmp(&b.0));
     let median_ratio = median(&ratios.iter().map(|r| r.0).collect::<Vec<_>>());
-    let report = SweepReport {
-        log: args.log.display().to_string(),
+    let worst_ratio = worst.map(|w| w.0);
+    let worst_variant = worst.map(|w| w.1.to_string());
+    SweepReport {
+        log: input.log.clone(),
         matcher: config.kind(),
-        scans: records.len(),
-        relations_total: relations.len(),
+        scans: input.records.len(),
+        relations_total: input.relations.len(),
         relations_over_0_5_m: default.relations_over_0_5_m,
         default,
-        worst_ratio: worst.map(|w| w.0),
-        worst_variant: worst.map(|w| w.1.to_string()),
+        worst_ratio,
+        worst_variant,
         median_ratio,
-        variants: reports,
-    };
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print!("{}", table(&report));
+        variants,
     }
-    Ok(())
+}
+
+/// The ratio of a variant's figures to the default's, as reports give it.
+#[must_use]
+pub fn variant_report(
+    name: &str,
+    result: Result<RunFigures, String>,
+    default: &RunFigures,
+) -> VariantReport {
+    let (figures, error) = match result {
+        Ok(f) => (Some(f), None),
+        Err(e) => (None, Some(e)),
+    };
+    VariantReport {
+        name: name.to_string(),
+        ratio: figures.as_ref().map(|f| f.trans_mean / default.trans_mean),
+        figures,
+        error,
+    }
 }
 
 #[cfg(test)]

@@ -3,7 +3,7 @@
 use super::*;
 
 /// The figures of one run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RunFigures {
     /// Mean translational relation error (m).
     pub trans_mean: f64,
@@ -25,17 +25,64 @@ pub struct RunFigures {
     pub relations_over_0_5_m: usize,
 }
 
-/// One run to make.
-#[derive(Debug)]
-pub(super) struct Job {
-    pub(super) name: String,
-    pub(super) input: Option<InputVariant>,
+/// One run of a sweep: the default, or one variant.
+#[derive(Debug, Clone)]
+pub struct Job {
+    /// `default` or the variant's name.
+    pub name: String,
+    input: Option<InputVariant>,
     /// The configuration, or why the variant has none.
-    pub(super) config: Result<MatcherConfig, String>,
+    config: Result<MatcherConfig, String>,
 }
 
 impl Job {
-    pub(super) fn run(&self, records: &[Record], relations: &[Relation]) -> Result<RunFigures> {
+    /// The run with the configuration as given.
+    #[must_use]
+    pub fn default_run(config: &MatcherConfig) -> Self {
+        Self {
+            name: "default".to_string(),
+            input: None,
+            config: Ok(config.clone()),
+        }
+    }
+
+    /// The run of one variant of `config`.
+    #[must_use]
+    pub fn variant(config: &MatcherConfig, v: &Variant) -> Self {
+        match &v.perturbation {
+            Perturbation::Input(i) => Self {
+                name: v.name.clone(),
+                input: Some(*i),
+                config: Ok(config.clone()),
+            },
+            Perturbation::Parameter { key, factor } => Self {
+                name: v.name.clone(),
+                input: None,
+                config: config
+                    .scaled(key, *factor)
+                    .map(|mut c| {
+                        c.fill_defaults();
+                        c
+                    })
+                    .map_err(|e| format!("invalid configuration: {e}")),
+            },
+        }
+    }
+
+    /// The run named `name` (`default` or a variant of [`all_variants`]).
+    pub fn named(config: &MatcherConfig, name: &str) -> Result<Self> {
+        if name == "default" {
+            return Ok(Self::default_run(config));
+        }
+        let v = select_variants(all_variants(config), &[name.to_string()])?;
+        match v.first() {
+            Some(v) => Ok(Self::variant(config, v)),
+            None => bail!("unknown variant {name}"),
+        }
+    }
+
+    /// Matches the (perturbed) records and scores the trajectory with `relations`.
+    pub fn run(&self, records: &[Record], relations: &[Relation]) -> Result<RunFigures> {
         let config = match &self.config {
             Ok(c) => c,
             Err(e) => bail!("{e}"),

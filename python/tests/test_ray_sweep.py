@@ -1,0 +1,44 @@
+"""`examples/ray_sweep.py` on a local Ray instance writes the report `qicp sweep` writes: the
+same runs with the same figures (all but the wall times), ratios and summary."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from conftest import INTEL_RELATIONS, REPO, run_cli
+
+import ray  # noqa: F401  (the example needs it; CI installs it)
+
+SCANS = "1500"
+VARIANTS = "scans/2,odom-bias,icp.max_dist_start*0.7,relevance.tau_max*1.4,nope.nothing*0.7"
+
+
+def without_times(report):
+    report = dict(report)
+    for run in [report["default"], *report["variants"]]:
+        run.pop("ms_per_scan_median", None)
+    return report
+
+
+def test_the_ray_sweep_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path):
+    variants = VARIANTS.rsplit(",", 1)[0]  # the last name is unknown: both refuse it
+    cli = run_cli(
+        qicp_bin, "sweep", intel, "--matcher", "q-wsm", "--relations", INTEL_RELATIONS,
+        "--scans", SCANS, "--variants", variants, "--json", "--jobs", "2",
+    )
+    assert cli.returncode == 0, cli.stderr
+    out = tmp_path / "ray.json"
+    script = [sys.executable, str(REPO / "examples" / "ray_sweep.py"), str(intel), str(INTEL_RELATIONS)]
+    opts = ["--matcher", "q-wsm", "--scans", SCANS, "--address", "local"]
+    done = subprocess.run([*script, *opts, "--variants", variants, "--out", str(out)],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    ours, theirs = json.loads(out.read_text()), json.loads(cli.stdout)
+    assert without_times(ours) == without_times(theirs)
+    assert [v["name"] for v in ours["variants"]] == variants.split(",")
+    assert ours["default"]["trans_mean"] < 0.05
+
+    refused = subprocess.run([*script, *opts, "--variants", VARIANTS], capture_output=True, text=True)
+    assert refused.returncode != 0 and "unknown variants nope.nothing*0.7" in refused.stderr

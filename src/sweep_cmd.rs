@@ -1,0 +1,84 @@
+//! `qicp sweep LOG --matcher KIND --relations FILE`: the command over
+//! [`qicp_runner::sweep`], which holds the variants, the runs and the report.
+
+use anyhow::Result;
+use qicp_runner::sweep::{
+    SweepInput, all_variants, report, select_variants, sweep as run_sweep, table,
+};
+use std::num::NonZeroUsize;
+use std::path::PathBuf;
+
+/// Arguments of `qicp sweep`.
+#[derive(Debug, clap::Args)]
+pub struct SweepArgs {
+    /// CARMEN log (plain or .bz2).
+    pub log: PathBuf,
+    /// Matcher kind: idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm. Overrides the config's kind.
+    #[arg(long)]
+    pub matcher: Option<String>,
+    /// TOML file with a `[matcher]` table: the default configuration.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Freiburg relations file every run is scored with.
+    #[arg(long)]
+    pub relations: PathBuf,
+    /// Print the report as JSON on stdout (progress stays on stderr).
+    #[arg(long)]
+    pub json: bool,
+    /// Runs at a time (default: the available cores).
+    #[arg(long)]
+    pub jobs: Option<NonZeroUsize>,
+    /// Use only the first N records of the log.
+    #[arg(long)]
+    pub scans: Option<NonZeroUsize>,
+    /// Run only these variants (comma-separated names; the default always runs).
+    #[arg(long, value_delimiter = ',')]
+    pub variants: Option<Vec<String>>,
+    /// Skip and count malformed log lines instead of failing.
+    #[arg(long)]
+    pub lenient: bool,
+}
+
+/// Runs the command.
+pub fn run(args: SweepArgs) -> Result<()> {
+    // Everything that can be refused is checked before the log is read and before matching.
+    let config = crate::match_cmd::load_config(args.config.as_ref(), args.matcher.as_deref())?;
+    let all = all_variants(&config);
+    let variants = match &args.variants {
+        Some(names) => select_variants(all, names)?,
+        None => all,
+    };
+    let input = SweepInput::load(&args.log, &args.relations, args.scans, args.lenient)?;
+    let jobs = args
+        .jobs
+        .or_else(|| std::thread::available_parallelism().ok())
+        .map_or(1, NonZeroUsize::get);
+    eprintln!(
+        "sweeping {} on {} scans: default + {} variants, {jobs} at a time",
+        config.kind(),
+        input.records.len(),
+        variants.len()
+    );
+    let (default, reports) = run_sweep(
+        &input.records,
+        &input.relations,
+        &config,
+        &variants,
+        jobs,
+        |name, result, elapsed| match result {
+            Ok(f) => eprintln!(
+                "variant {name} done in {:.1} s (trans_mean {:.4} m)",
+                elapsed.as_secs_f64(),
+                f.trans_mean
+            ),
+            Err(e) => eprintln!("variant {name} failed: {e}"),
+        },
+    )?;
+    let report = report(&input, &config, default, reports);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", table(&report));
+    }
+    Ok(())
+}
