@@ -14,9 +14,10 @@ pub mod convert_cmd;
 pub mod eval_cmd;
 pub mod experiment;
 pub mod match_cmd;
+/// The pictures: the `qicp-plots` crate.
+pub use qicp_plots as plots;
 /// The match loop and its outputs: the `qicp-runner` crate's.
 pub use qicp_runner::matching;
-pub mod plots;
 pub mod sim_cmd;
 /// The robustness sweep: the `qicp-runner` crate's.
 pub use qicp_runner::sweep;

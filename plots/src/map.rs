@@ -134,7 +134,7 @@ pub(super) fn map_bounds(
             ys.push(q.y);
         }
     }
-    let q = |v: &[f64], f| crate::matching::quantile(v, f);
+    let q = |v: &[f64], f| qicp_runner::matching::quantile(v, f);
     let (mut lo, mut hi) = if xs.is_empty() {
         (
             (f64::INFINITY, f64::INFINITY),

@@ -56,7 +56,7 @@ pub fn per_scan(out: &Path, y_desc: &str, panels: &[Panel]) -> Result<(), PlotEr
             .max()
             .unwrap_or(0);
         let x_max = (n.max(2) - 1) as f64;
-        let q = |f| crate::matching::quantile(&all, f);
+        let q = |f| qicp_runner::matching::quantile(&all, f);
         let mut hi = q(0.995) * 1.15;
         if let Some(cap) = panel.y_cap {
             hi = hi.min(cap);
@@ -119,7 +119,7 @@ pub(super) fn draw_panel<'a, 'b: 'a>(
         let usable = |v: f64| v.is_finite();
         let finite: Vec<f64> = s.values.iter().copied().filter(|v| usable(*v)).collect();
         let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
-        let median = crate::matching::quantile(&finite, 0.5);
+        let median = qicp_runner::matching::quantile(&finite, 0.5);
         let color = s.color;
         // Gaps where a scan has no value (a fallback); single scans as dots.
         let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];

@@ -9,6 +9,8 @@
 //! Text uses DejaVu Sans, embedded from the `dejavu` crate and rasterised by `ab_glyph`: no
 //! system font or fontconfig is needed.
 
+#![warn(missing_docs)]
+
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
