@@ -5,8 +5,9 @@ those packages."""
 import itertools
 import math
 
-import mcap_ros2.reader as mcap_ros2_reader
 import mcap_ros2.writer as mcap_ros2_writer
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 
@@ -110,6 +111,14 @@ def bag(records, tmp_path_factory):
     return path
 
 
+def messages(path):
+    """(topic, decoded message) of every message of a bag, decoded by mcap-ros2-support."""
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            yield channel.topic, msg
+
+
 def match_bag(qicp_bin, bag, matcher, out, *extra):
     cli = run_cli(qicp_bin, "match", bag, "--matcher", matcher, "--out", out, *extra)
     assert cli.returncode == 0, cli.stderr
@@ -162,11 +171,11 @@ def test_convert_writes_the_bag_the_independent_writer_writes(qicp_bin, intel, b
 
     # And the independent reader decodes qicp's bag.
     scans = odoms = 0
-    for msg in mcap_ros2_reader.read_ros2_messages(str(ours)):
-        if msg.channel.topic == "/scan":
+    for topic, msg in messages(ours):
+        if topic == "/scan":
             scans += 1
-            assert msg.ros_msg.header.frame_id == "laser" and len(msg.ros_msg.ranges) == 180
-        elif msg.channel.topic == "/odom":
+            assert msg.header.frame_id == "laser" and len(msg.ranges) == 180
+        elif topic == "/odom":
             odoms += 1
     assert scans == SCANS and odoms == SCANS
 
@@ -176,14 +185,14 @@ def test_out_mcap_holds_the_estimated_poses(qicp_bin, bag, tmp_path):
     traj = match_bag(qicp_bin, bag, "wsm", tmp_path / "run", "--out-mcap", out)
     poses = []
     tf_map_odom = 0
-    for msg in mcap_ros2_reader.read_ros2_messages(str(out)):
-        if msg.channel.topic == "/qicp/odom":
-            p = msg.ros_msg.pose.pose
+    for topic, msg in messages(out):
+        if topic == "/qicp/odom":
+            p = msg.pose.pose
             q = p.orientation
             poses.append((p.position.x, p.position.y, 2 * math.atan2(q.z, q.w)))
-            assert msg.ros_msg.header.frame_id == "map"
-        elif msg.channel.topic == "/tf":
-            tf_map_odom += sum(t.header.frame_id == "map" for t in msg.ros_msg.transforms)
+            assert msg.header.frame_id == "map"
+        elif topic == "/tf":
+            tf_map_odom += sum(t.header.frame_id == "map" for t in msg.transforms)
     poses = np.array(poses)
     assert len(poses) == len(traj) == SCANS and tf_map_odom == SCANS
     assert np.abs(poses[:, :2] - traj[:, 1:3]).max() < 1e-9
