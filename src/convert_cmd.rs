@@ -2,10 +2,9 @@
 //! and for `qicp match` on bags.
 
 use crate::logs::carmen::{CarmenOptions, DEFAULT_MAX_BEAMS};
-use crate::logs::rosbag::{BagLayout, BagWriter};
 use crate::logs::{LogOptions, LogReader};
-use crate::matching::progress_spinner;
-use anyhow::{Context, Result, bail};
+use crate::matching::{BagOutput, progress_spinner};
+use anyhow::{Result, bail};
 use std::path::PathBuf;
 
 /// Arguments of `qicp convert`.
@@ -42,22 +41,11 @@ pub fn run(args: ConvertArgs) -> Result<()> {
     if matches!(reader, LogReader::Bag(_)) {
         bail!("{} is already a bag (MCAP)", args.log.display());
     }
-    let dir = match args.out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => std::path::Path::new("."),
-    };
-    let file = crate::matching::temp_builder(".qicp-bag.")
-        .tempfile_in(dir)
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
-    let mut bag = BagWriter::new(
-        std::io::BufWriter::new(file),
-        &args.out.display().to_string(),
-        BagLayout::default(),
-    )?;
+    let mut bag = BagOutput::create(&args.out)?;
     let limit = args.max_records.unwrap_or(usize::MAX);
     let bar = progress_spinner("convert");
     for record in reader.by_ref().take(limit) {
-        bag.record(&record?)?;
+        bag.writer.record(&record?)?;
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -65,14 +53,7 @@ pub fn run(args: ConvertArgs) -> Result<()> {
     if reader.records() == 0 {
         return Err(reader.empty(&args.log).into());
     }
-    let file = bag
-        .finish()?
-        .into_inner()
-        .map_err(|e| e.into_error())
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    file.persist(&args.out)
-        .map_err(|e| e.error)
-        .with_context(|| format!("renaming into {}", args.out.display()))?;
+    bag.commit()?;
     eprintln!(
         "wrote {} records of {} to {}",
         reader.records(),

@@ -3,9 +3,9 @@
 use crate::eval::{RelationProbe, evaluate_relations};
 use crate::logs::carmen::CarmenOptions;
 use crate::logs::relations::read_relations;
-use crate::logs::rosbag::{BagLayout, BagOptions, BagWriter, OdometrySource};
+use crate::logs::rosbag::{BagOptions, OdometrySource};
 use crate::logs::{LogOptions, LogReader};
-use crate::matching::{MatchLoop, RunWriter, progress_spinner};
+use crate::matching::{BagOutput, MatchLoop, RunWriter, progress_spinner};
 use anyhow::{Context, Result, bail};
 use qicp_matchers::MatcherConfig;
 use std::path::PathBuf;
@@ -88,45 +88,6 @@ impl BagArgs {
                 ..BagOptions::new(self.scan_topic.clone(), odometry)
             },
         }
-    }
-}
-
-/// A bag written under a temporary name beside its path and renamed into place when complete.
-struct BagOutput {
-    path: PathBuf,
-    writer: BagWriter<std::io::BufWriter<tempfile::NamedTempFile>>,
-}
-
-impl BagOutput {
-    fn create(path: &std::path::Path) -> Result<Self> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => std::path::Path::new("."),
-        };
-        let file = crate::matching::temp_builder(".qicp-bag.")
-            .tempfile_in(dir)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        let writer = BagWriter::new(
-            std::io::BufWriter::new(file),
-            &path.display().to_string(),
-            BagLayout::default(),
-        )?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            writer,
-        })
-    }
-
-    fn commit(self) -> Result<()> {
-        let file = self.writer.finish()?;
-        let file = file
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .with_context(|| format!("writing {}", self.path.display()))?;
-        file.persist(&self.path)
-            .map_err(|e| e.error)
-            .with_context(|| format!("renaming into {}", self.path.display()))?;
-        Ok(())
     }
 }
 

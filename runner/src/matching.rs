@@ -537,6 +537,50 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// A ROS 2 bag written under a temporary name beside its path and renamed into place by
+/// [`BagOutput::commit`]; dropped before, it leaves no file.
+#[derive(Debug)]
+pub struct BagOutput {
+    path: std::path::PathBuf,
+    /// The bag, written to its temporary file.
+    pub writer: qicp_io::rosbag::BagWriter<std::io::BufWriter<tempfile::NamedTempFile>>,
+}
+
+impl BagOutput {
+    /// Opens the temporary file beside `path` (a bad directory fails here, before any work).
+    pub fn create(path: &std::path::Path) -> Result<Self> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => std::path::Path::new("."),
+        };
+        let file = temp_builder(".qicp-bag.")
+            .tempfile_in(dir)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let writer = qicp_io::rosbag::BagWriter::new(
+            std::io::BufWriter::new(file),
+            &path.display().to_string(),
+            qicp_io::rosbag::BagLayout::default(),
+        )?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            writer,
+        })
+    }
+
+    /// Finishes the bag and renames it into place.
+    pub fn commit(self) -> Result<()> {
+        let file = self.writer.finish()?;
+        let file = file
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        file.persist(&self.path)
+            .map_err(|e| e.error)
+            .with_context(|| format!("renaming into {}", self.path.display()))?;
+        Ok(())
+    }
+}
+
 /// Writes `trajectory.tum`, `matches.csv` and `config.toml` of a run into `dir`, each renamed
 /// into place when complete.
 pub fn write_run(dir: &Path, run: &MatchRun, config: &MatcherConfig) -> Result<()> {
