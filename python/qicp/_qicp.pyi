@@ -1,24 +1,43 @@
 """Type stubs of the qicp extension module."""
 
 from os import PathLike
-from typing import Iterator, Optional, Sequence, Tuple, Union
+from typing import Iterator, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
 
+__all__ = [
+    "CarmenLog",
+    "MatchResult",
+    "Matcher",
+    "QicpError",
+    "Record",
+    "__version__",
+    "ate",
+    "evaluate_relations",
+    "matcher_names",
+    "read_carmen",
+    "read_tum",
+    "sweep_report",
+    "sweep_run",
+    "sweep_variants",
+    "write_tum",
+]
+
 __version__: str
 
-Pose = Tuple[float, float, float]
+_Pose = Tuple[float, float, float]
 """A planar pose (x m, y m, θ rad)."""
 
-Trajectory = Union[npt.ArrayLike, Sequence[Tuple[float, float, float, float]]]
+_Trajectory = Union[npt.ArrayLike, Sequence[Tuple[float, float, float, float]]]
 """An N×4 array of (t s, x m, y m, θ rad)."""
 
-StrPath = Union[str, "PathLike[str]"]
+_StrPath = Union[str, "PathLike[str]"]
 
 class QicpError(Exception):
     """A refusal of qicp, with the message the command line prints."""
 
+@final
 class MatchResult:
     """What a matcher says about one scan."""
 
@@ -26,7 +45,7 @@ class MatchResult:
     def timestamp(self) -> float:
         """Time of the scan (s)."""
     @property
-    def pose(self) -> Pose:
+    def pose(self) -> _Pose:
         """The robot's pose in the world, as the command line's trajectory has it."""
     @property
     def covariance(self) -> npt.NDArray[np.float64]:
@@ -50,6 +69,7 @@ class MatchResult:
     def correspondences(self) -> int:
         """Correspondences in the final iteration."""
 
+@final
 class Record:
     """One laser record of a log."""
 
@@ -67,15 +87,16 @@ class Record:
     @property
     def range_min(self) -> float: ...
     @property
-    def odometry(self) -> Pose:
+    def odometry(self) -> _Pose:
         """Robot pose by odometry."""
     @property
-    def truth(self) -> Optional[Pose]:
+    def truth(self) -> Optional[_Pose]:
         """Robot pose by ground truth, where the log has it."""
     @property
-    def laser_offset(self) -> Pose:
+    def laser_offset(self) -> _Pose:
         """Pose of the laser on the robot."""
 
+@final
 class CarmenLog:
     """The laser records of a CARMEN log, read as they are asked for."""
 
@@ -85,6 +106,7 @@ class CarmenLog:
     def skipped_lines(self) -> int:
         """Lines skipped as malformed so far (only with lenient=True)."""
 
+@final
 class Matcher:
     """A laser-odometry pipeline: feed it scans in time order, get the robot's pose.
 
@@ -93,9 +115,9 @@ class Matcher:
     ``[matcher]`` given as dicts: ``Matcher("q-wsm", icp={"max_dist_start": 0.7})``.
     """
 
-    def __init__(self, kind: str = "q-wsm", **sections: dict) -> None: ...
+    def __new__(cls, kind: str = "q-wsm", **sections: dict) -> "Matcher": ...
     @staticmethod
-    def from_toml(path: StrPath) -> "Matcher":
+    def from_toml(path: _StrPath) -> "Matcher":
         """The matcher a TOML file's ``[matcher]`` describes."""
     @property
     def kind(self) -> str: ...
@@ -107,11 +129,11 @@ class Matcher:
         angle_min: float,
         angle_increment: float,
         *,
-        odometry: Pose,
+        odometry: _Pose,
         timestamp: float,
         range_max: float = 81.0,
         range_min: float = 0.0,
-        laser_offset: Pose = (0.0, 0.0, 0.0),
+        laser_offset: _Pose = (0.0, 0.0, 0.0),
     ) -> MatchResult:
         """Matches one scan; a float64 ``ranges`` is read in place. The GIL is
         released while matching."""
@@ -120,54 +142,54 @@ class Matcher:
     def map_points(self) -> npt.NDArray[np.float64]:
         """The reference's points (a boosted matcher's whole map) as an N×2 array (m)."""
 
-def read_carmen(path: StrPath, *, lenient: bool = False, max_beams: int = 10000) -> CarmenLog:
+def read_carmen(path: _StrPath, *, lenient: bool = False, max_beams: int = 10000) -> CarmenLog:
     """Streams the laser records of a CARMEN log (plain or bzip2) in time order."""
 
 def evaluate_relations(
-    trajectory: Trajectory, relations_path: StrPath, *, max_dt: float = 0.1
+    trajectory: _Trajectory, relations_path: _StrPath, *, max_dt: float = 0.1
 ) -> dict:
     """Freiburg benchmark scores (keys of ``qicp eval relations --json``)."""
 
 def ate(
-    estimate: Trajectory,
-    truth: Trajectory,
+    estimate: _Trajectory,
+    truth: _Trajectory,
     *,
     max_dt: float = 0.1,
     rpe_segment_m: float = 1.0,
 ) -> dict:
     """Origin-aligned ATE, RPE and final error (keys of ``qicp eval ate --json``)."""
 
-def read_tum(path: StrPath) -> npt.NDArray[np.float64]:
+def read_tum(path: _StrPath) -> npt.NDArray[np.float64]:
     """A TUM trajectory as an N×4 array."""
 
-def write_tum(path: StrPath, trajectory: Trajectory) -> None:
+def write_tum(path: _StrPath, trajectory: _Trajectory) -> None:
     """Writes a trajectory as TUM, as ``qicp match`` writes ``trajectory.tum``."""
 
 def matcher_names() -> list[str]:
     """The matcher names the registry resolves."""
 
-def sweep_variants(matcher: str = "q-wsm", *, config: Optional[StrPath] = None) -> list[str]:
+def sweep_variants(matcher: str = "q-wsm", *, config: Optional[_StrPath] = None) -> list[str]:
     """The variants ``qicp sweep`` runs for a matcher, in report order (the default aside)."""
 
 def sweep_run(
-    log: StrPath,
-    relations: StrPath,
+    log: _StrPath,
+    relations: _StrPath,
     variant: str = "default",
     *,
     matcher: str = "q-wsm",
-    config: Optional[StrPath] = None,
+    config: Optional[_StrPath] = None,
     scans: Optional[int] = None,
     lenient: bool = False,
 ) -> dict:
     """One run of ``qicp sweep``: its figures (the keys of a variant in ``--json``)."""
 
 def sweep_report(
-    log: StrPath,
-    relations: StrPath,
+    log: _StrPath,
+    relations: _StrPath,
     results: Sequence[Tuple[str, Union[dict, str]]],
     *,
     matcher: str = "q-wsm",
-    config: Optional[StrPath] = None,
+    config: Optional[_StrPath] = None,
     scans: Optional[int] = None,
     lenient: bool = False,
 ) -> str:
