@@ -12,7 +12,7 @@ Python. A log fed through :class:`Matcher` gives the trajectory ``qicp match`` w
 """
 
 from ._qicp import (
-    CarmenLog,
+    Log,
     Matcher,
     MatchResult,
     QicpError,
@@ -21,6 +21,7 @@ from ._qicp import (
     ate,
     evaluate_relations,
     matcher_names,
+    read_bag,
     read_carmen,
     read_tum,
     sweep_report,
@@ -30,7 +31,7 @@ from ._qicp import (
 )
 
 __all__ = [
-    "CarmenLog",
+    "Log",
     "Matcher",
     "MatchResult",
     "QicpError",
@@ -39,6 +40,7 @@ __all__ = [
     "ate",
     "evaluate_relations",
     "matcher_names",
+    "read_bag",
     "read_carmen",
     "read_tum",
     "sweep_report",

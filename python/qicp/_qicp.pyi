@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
-    "CarmenLog",
+    "Log",
     "MatchResult",
     "Matcher",
     "QicpError",
@@ -16,6 +16,7 @@ __all__ = [
     "ate",
     "evaluate_relations",
     "matcher_names",
+    "read_bag",
     "read_carmen",
     "read_tum",
     "sweep_report",
@@ -97,14 +98,21 @@ class Record:
         """Pose of the laser on the robot."""
 
 @final
-class CarmenLog:
-    """The laser records of a CARMEN log, read as they are asked for."""
+class Log:
+    """The laser records of a log (CARMEN or ROS 2 bag), read as they are asked for."""
 
     def __iter__(self) -> Iterator[Record]: ...
     def __next__(self) -> Record: ...
     @property
+    def records(self) -> int:
+        """Records delivered so far."""
+    @property
     def skipped_lines(self) -> int:
-        """Lines skipped as malformed so far (only with lenient=True)."""
+        """Lines skipped as malformed so far (CARMEN with lenient=True)."""
+    @property
+    def dropped(self) -> int:
+        """Records dropped so far: CARMEN lines far out of time order, bag scans without
+        odometry around them."""
 
 @final
 class Matcher:
@@ -142,8 +150,20 @@ class Matcher:
     def map_points(self) -> npt.NDArray[np.float64]:
         """The reference's points (a boosted matcher's whole map) as an N×2 array (m)."""
 
-def read_carmen(path: _StrPath, *, lenient: bool = False, max_beams: int = 10000) -> CarmenLog:
+def read_carmen(path: _StrPath, *, lenient: bool = False, max_beams: int = 10000) -> Log:
     """Streams the laser records of a CARMEN log (plain or bzip2) in time order."""
+
+def read_bag(
+    path: _StrPath,
+    *,
+    scan_topic: str = "/scan",
+    odom_topic: str = "/odom",
+    odom_frame: Optional[str] = None,
+    base_frame: str = "base_link",
+    max_beams: int = 10000,
+) -> Log:
+    """Streams the laser records of a ROS 2 bag (MCAP): LaserScan with odometry from a topic
+    or, with ``odom_frame``, from /tf, interpolated to each scan's stamp."""
 
 def evaluate_relations(
     trajectory: _Trajectory, relations_path: _StrPath, *, max_dt: float = 0.1

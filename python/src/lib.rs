@@ -14,9 +14,10 @@ use pyo3::types::{PyDict, PyList};
 use qicp_core::{BeamGeometry, Pose2, Record, Scan};
 use qicp_eval::{AteOptions, AteReport, RelationsReport};
 use qicp_io::carmen::{CarmenOptions, CarmenReader, DEFAULT_FLASER_MAX_RANGE, DEFAULT_MAX_BEAMS};
+use qicp_io::rosbag::{BagOptions, OdometrySource, is_mcap};
 use qicp_io::tum::Stamped;
+use qicp_io::{LogOptions, LogReader};
 use qicp_matchers::{MatcherConfig, Odometry, Registry};
-use std::io::BufRead;
 use std::path::PathBuf;
 use std::sync::{LazyLock, Mutex, MutexGuard};
 
@@ -394,16 +395,16 @@ impl LaserRecord {
     }
 }
 
-/// The laser records of a CARMEN log, read as they are asked for (see `read_carmen`).
+/// The laser records of a log (CARMEN or ROS 2 bag), read as they are asked for (see
+/// `read_carmen` and `read_bag`).
 #[pyclass(module = "qicp._qicp")]
-struct CarmenLog {
+struct Log {
     path: PathBuf,
-    reader: Mutex<CarmenReader<Box<dyn BufRead + Send>>>,
-    delivered: Mutex<usize>,
+    reader: Mutex<LogReader>,
 }
 
 #[pymethods]
-impl CarmenLog {
+impl Log {
     fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
         slf
     }
@@ -412,22 +413,30 @@ impl CarmenLog {
         let mut reader = lock(&self.reader);
         let reader = &mut *reader;
         match py.detach(|| reader.next()) {
-            Some(Ok(record)) => {
-                *lock(&self.delivered) += 1;
-                Ok(Some(LaserRecord(record)))
-            }
+            Some(Ok(record)) => Ok(Some(LaserRecord(record))),
             Some(Err(e)) => Err(refusal(e)),
-            None if *lock(&self.delivered) == 0 => {
-                Err(refusal(qicp_io::LogError::empty(&self.path, &reader.info)))
-            }
+            None if reader.records() == 0 => Err(refusal(reader.empty(&self.path))),
             None => Ok(None),
         }
     }
 
-    /// Lines skipped as malformed so far (only with `lenient=True`).
+    /// Records delivered so far.
+    #[getter]
+    fn records(&self) -> usize {
+        lock(&self.reader).records()
+    }
+
+    /// Lines skipped as malformed so far (CARMEN with `lenient=True`).
     #[getter]
     fn skipped_lines(&self) -> usize {
-        lock(&self.reader).info.skipped_lines
+        lock(&self.reader).skipped_lines()
+    }
+
+    /// Records dropped so far: CARMEN lines too far out of time order, bag scans that no
+    /// odometry surrounds in time.
+    #[getter]
+    fn dropped(&self) -> usize {
+        lock(&self.reader).dropped()
     }
 }
 
@@ -436,17 +445,60 @@ impl CarmenLog {
 /// (with `lenient=True` it is skipped and counted); a log without a laser record raises too.
 #[pyfunction]
 #[pyo3(signature = (path, *, lenient = false, max_beams = DEFAULT_MAX_BEAMS))]
-fn read_carmen(path: PathBuf, lenient: bool, max_beams: usize) -> PyResult<CarmenLog> {
+fn read_carmen(path: PathBuf, lenient: bool, max_beams: usize) -> PyResult<Log> {
     let options = CarmenOptions {
         lenient,
         max_beams,
         ..CarmenOptions::default()
     };
     let reader = CarmenReader::open(&path, &options).map_err(refusal)?;
-    Ok(CarmenLog {
+    Ok(Log {
+        path,
+        reader: Mutex::new(LogReader::Carmen(Box::new(reader))),
+    })
+}
+
+/// Streams the laser records of a ROS 2 bag (rosbag2, MCAP storage), as `qicp match BAG`
+/// reads them: scans from `scan_topic`, odometry from `odom_topic` or, with `odom_frame`, from
+/// the /tf transform `odom_frame` -> `base_frame`, interpolated to each scan's stamp. A
+/// missing topic raises `QicpError` listing the bag's topics.
+#[pyfunction]
+#[pyo3(signature = (path, *, scan_topic = "/scan", odom_topic = "/odom", odom_frame = None,
+                    base_frame = "base_link", max_beams = DEFAULT_MAX_BEAMS))]
+fn read_bag(
+    path: PathBuf,
+    scan_topic: &str,
+    odom_topic: &str,
+    odom_frame: Option<String>,
+    base_frame: &str,
+    max_beams: usize,
+) -> PyResult<Log> {
+    if !is_mcap(&path) {
+        let why = if path.is_file() {
+            "not a ROS 2 bag in MCAP storage (no MCAP magic bytes)"
+        } else {
+            "no such file"
+        };
+        return Err(QicpError::new_err(format!("{}: {why}", path.display())));
+    }
+    let odometry = match odom_frame {
+        Some(odom_frame) => OdometrySource::Tf {
+            odom_frame,
+            base_frame: base_frame.to_string(),
+        },
+        None => OdometrySource::Topic(odom_topic.to_string()),
+    };
+    let options = LogOptions {
+        bag: BagOptions {
+            max_beams,
+            ..BagOptions::new(scan_topic, odometry)
+        },
+        ..LogOptions::default()
+    };
+    let reader = LogReader::open(&path, &options).map_err(refusal)?;
+    Ok(Log {
         path,
         reader: Mutex::new(reader),
-        delivered: Mutex::new(0),
     })
 }
 
@@ -733,8 +785,9 @@ fn _qicp(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Matcher>()?;
     m.add_class::<MatchResult>()?;
     m.add_class::<LaserRecord>()?;
-    m.add_class::<CarmenLog>()?;
+    m.add_class::<Log>()?;
     m.add_function(wrap_pyfunction!(read_carmen, m)?)?;
+    m.add_function(wrap_pyfunction!(read_bag, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate_relations, m)?)?;
     m.add_function(wrap_pyfunction!(ate, m)?)?;
     m.add_function(wrap_pyfunction!(read_tum, m)?)?;

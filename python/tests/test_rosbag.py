@@ -210,3 +210,22 @@ def test_bag_errors_name_what_is_missing(qicp_bin, records, bag, tmp_path):
     assert cli.returncode != 0 and "20 scans but no odometry topic /odom" in cli.stderr
     cli = run_cli(qicp_bin, "match", bag, "--matcher", "wsm", "--out", tmp_path / "d", "--odom-frame", "odom")
     assert cli.returncode != 0 and "no transform odom -> base_link on /tf" in cli.stderr
+
+
+def test_read_bag_gives_the_records_qicp_match_reads(qicp_bin, bag, records, tmp_path):
+    m = qicp.Matcher("wsm")
+    log = qicp.read_bag(bag)
+    traj = [(res.timestamp, *res.pose) for res in map(m.process_record, log)]
+    assert log.records == SCANS and log.dropped == 0
+    qicp.write_tum(tmp_path / "py.tum", traj)
+    cli = match_bag(qicp_bin, bag, "wsm", tmp_path / "cli")
+    assert (tmp_path / "py.tum").read_bytes() == (tmp_path / "cli" / "trajectory.tum").read_bytes()
+    assert len(cli) == SCANS
+    first = next(iter(qicp.read_bag(bag)))
+    assert first.ranges.tolist() == np.float32(records[0].ranges).astype(np.float64).tolist()
+    assert np.allclose(first.odometry, records[0].odometry, atol=1e-12)
+
+    with pytest.raises(qicp.QicpError, match="no topic /laser; the bag has: /odom"):
+        list(qicp.read_bag(bag, scan_topic="/laser"))
+    with pytest.raises(qicp.QicpError, match="not a ROS 2 bag"):
+        qicp.read_bag(qicp_bin)
