@@ -272,15 +272,10 @@ impl Samples {
     }
 }
 
-/// Median in seconds.
+/// Median in seconds; NaN for none.
 fn median(d: &[Duration]) -> f64 {
-    let mut s: Vec<f64> = d.iter().map(Duration::as_secs_f64).collect();
-    s.sort_by(f64::total_cmp);
-    match s.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => s[n / 2],
-        n => 0.5 * (s[n / 2 - 1] + s[n / 2]),
-    }
+    let secs: Vec<f64> = d.iter().map(Duration::as_secs_f64).collect();
+    crate::eval::stats::median(&secs).unwrap_or(f64::NAN)
 }
 
 fn build<I: SpatialIndex + Default>(points: &[Point2<f64>]) -> Result<I> {

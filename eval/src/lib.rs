@@ -21,9 +21,11 @@ pub use ate::{
     AteOptions, AteReport, align_origin, associate, ate_rmse, evaluate_ate, origin_alignment,
 };
 pub use load::{LogPoses, load_trajectory};
+pub mod stats;
 pub use relations::{
     RelationError, RelationProbe, RelationsReport, evaluate_relations, relation_errors,
 };
+pub(crate) use stats::summary as stats;
 
 use qicp_io::tum::Stamped;
 use std::borrow::Cow;
@@ -106,22 +108,6 @@ pub(crate) fn check_max_dt(max_dt: f64) -> Result<(), EvalError> {
             why: "must be finite and non-negative",
         })
     }
-}
-
-/// Mean, population standard deviation and maximum; NaN for no values.
-pub(crate) fn stats(v: impl Iterator<Item = f64> + Clone) -> (f64, f64, f64) {
-    let (mut n, mut sum, mut max) = (0usize, 0.0, f64::NAN);
-    for x in v.clone() {
-        n += 1;
-        sum += x;
-        max = x.max(max);
-    }
-    if n == 0 {
-        return (f64::NAN, f64::NAN, f64::NAN);
-    }
-    let mean = sum / n as f64;
-    let var = v.map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64;
-    (mean, var.sqrt(), max)
 }
 
 #[cfg(test)]

@@ -86,17 +86,7 @@ pub struct MatchRun {
     pub odometry: Box<dyn Odometry>,
 }
 
-/// The `q`-quantile of `values` (nearest rank); NaN for none.
-#[must_use]
-pub fn quantile(values: &[f64], q: f64) -> f64 {
-    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
-    v[rank - 1]
-}
+pub use qicp_eval::stats::quantile;
 
 /// A progress bar on a terminal, nothing otherwise (CI, pipes).
 #[must_use]

@@ -18,6 +18,7 @@
 use crate::matching::run_matcher;
 use anyhow::{Context, Result, bail};
 use qicp_core::{BeamGeometry, BeamStatus, Pose2, Record, Scan, ScanError};
+use qicp_eval::stats::median;
 use qicp_eval::{RelationError, evaluate_relations, relation_errors};
 use qicp_io::relations::{Relation, read_relations};
 use qicp_io::tum::Stamped;
@@ -102,18 +103,6 @@ pub struct SweepReport {
     pub median_ratio: Option<f64>,
     /// Relations of the default run with a translational error above 0.5 m.
     pub relations_over_0_5_m: usize,
-}
-
-/// The median (mean of the middle two for an even count); `None` for none.
-fn median(values: &[f64]) -> Option<f64> {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    match n {
-        0 => None,
-        _ if n % 2 == 1 => v.get(n / 2).copied(),
-        _ => Some((v.get(n / 2 - 1)? + v.get(n / 2)?) / 2.0),
-    }
 }
 
 /// The runs of a sweep: the default, then one per variant, in report order.
@@ -511,13 +500,6 @@ mod tests {
         let err = select_variants(all, &["nope".to_string()]).expect_err("unknown");
         let msg = err.to_string();
         assert!(msg.contains("nope") && msg.contains("beams/2"), "{msg}");
-    }
-
-    #[test]
-    fn median_of_odd_and_even_counts() {
-        assert_eq!(median(&[]), None);
-        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
-        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), Some(2.5));
     }
 
     #[test]
