@@ -11,7 +11,7 @@ use std::path::PathBuf;
 /// Arguments of `qicp sweep`.
 #[derive(Debug, clap::Args)]
 pub struct SweepArgs {
-    /// CARMEN log (plain or .bz2).
+    /// CARMEN log (plain or .bz2), or ROS 2 bag (MCAP) with scans on /scan and odometry on /odom.
     pub log: PathBuf,
     /// Matcher kind: idc, wsm, q-idc, q-wsm, kd-idc, kd-wsm. Overrides the config's kind.
     #[arg(long)]

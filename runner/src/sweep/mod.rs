@@ -270,8 +270,8 @@ pub struct SweepInput {
 }
 
 impl SweepInput {
-    /// Reads the relations, then the CARMEN log (its first `scans` records; `lenient` skips
-    /// malformed lines), and checks that some relation falls within those records, so that a
+    /// Reads the relations, then the log (its first `scans` records): a CARMEN log (`lenient`
+    /// skips malformed lines) or a ROS 2 bag with scans on `/scan` and odometry on `/odom`, and checks that some relation falls within those records, so that a
     /// relations file of another log fails before any matching.
     pub fn load(
         log: &Path,
@@ -282,7 +282,18 @@ impl SweepInput {
         let relations_name = relations.display().to_string();
         let relations = read_relations(relations)
             .with_context(|| format!("reading relations {relations_name}"))?;
-        let mut records = qicp_io::carmen::load_for_command(log, lenient)?.records;
+        let mut records = if qicp_io::rosbag::is_mcap(log) {
+            // A ROS 2 bag (scans on /scan, odometry on /odom), streamed up to the scans used.
+            let mut reader = qicp_io::LogReader::open(log, &qicp_io::LogOptions::default())?;
+            let records = reader
+                .by_ref()
+                .take(scans.map_or(usize::MAX, NonZeroUsize::get))
+                .collect::<Result<Vec<_>, _>>()?;
+            reader.warn(log);
+            records
+        } else {
+            qicp_io::carmen::load_for_command(log, lenient)?.records
+        };
         if let Some(n) = scans {
             records.truncate(n.get());
         }
