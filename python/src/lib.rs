@@ -116,10 +116,26 @@ struct Matcher {
     odometry: Mutex<Box<dyn Odometry>>,
 }
 
+/// A configuration checked and completed, as the command line's `load_config` leaves it.
+fn checked(mut config: MatcherConfig) -> PyResult<MatcherConfig> {
+    config.validate().map_err(refusal)?;
+    config.fill_defaults();
+    Ok(config)
+}
+
+/// The `[matcher]` of a TOML file, resolved by the registry, with the command line's messages.
+fn config_file(path: &std::path::Path) -> PyResult<MatcherConfig> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| refusal_in(format!("reading {}", path.display()), e))?;
+    let config = REGISTRY
+        .parse(&text)
+        .map_err(|e| refusal_in(format!("in {}", path.display()), e))?;
+    checked(config)
+}
+
 impl Matcher {
-    fn from_config(mut config: MatcherConfig) -> PyResult<Self> {
-        config.validate().map_err(refusal)?;
-        config.fill_defaults();
+    /// A matcher of a [`checked`] configuration.
+    fn from_config(config: MatcherConfig) -> PyResult<Self> {
         let odometry = config.build().map_err(refusal)?;
         Ok(Self {
             kind: config.kind(),
@@ -160,7 +176,7 @@ impl Matcher {
     #[pyo3(signature = (kind = "q-wsm", **sections))]
     fn new(kind: &str, sections: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let Some(sections) = sections.filter(|s| !s.is_empty()) else {
-            return Self::from_config(REGISTRY.config(kind).map_err(refusal)?);
+            return Self::from_config(checked(REGISTRY.config(kind).map_err(refusal)?)?);
         };
         let mut matcher = section("matcher", sections)?;
         for (name, value) in &matcher {
@@ -174,18 +190,13 @@ impl Matcher {
         let mut doc = toml::Table::new();
         doc.insert("matcher".into(), toml::Value::Table(matcher));
         let text = toml::to_string(&doc).map_err(refusal)?;
-        Self::from_config(REGISTRY.parse(&text).map_err(refusal)?)
+        Self::from_config(checked(REGISTRY.parse(&text).map_err(refusal)?)?)
     }
 
     /// The matcher a TOML file describes (`[matcher]`, as `qicp match --config FILE` reads it).
     #[staticmethod]
     fn from_toml(path: PathBuf) -> PyResult<Self> {
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| refusal_in(format!("reading {}", path.display()), e))?;
-        let config = REGISTRY
-            .parse(&text)
-            .map_err(|e| refusal_in(format!("in {}", path.display()), e))?;
-        Self::from_config(config)
+        Self::from_config(config_file(&path)?)
     }
 
     /// The registry name of the matcher, e.g. `"q-wsm"`.
@@ -624,19 +635,10 @@ fn write_tum(path: PathBuf, trajectory: PyArrayLike2<'_, f64, AllowTypeChange>) 
 
 /// The matcher a sweep runs: the registry's `matcher`, or the `[matcher]` of a TOML file.
 fn sweep_config(matcher: &str, config: Option<PathBuf>) -> PyResult<MatcherConfig> {
-    let mut config = match config {
-        None => REGISTRY.config(matcher).map_err(refusal)?,
-        Some(path) => {
-            let text = std::fs::read_to_string(&path)
-                .map_err(|e| refusal_in(format!("reading {}", path.display()), e))?;
-            REGISTRY
-                .parse(&text)
-                .map_err(|e| refusal_in(format!("in {}", path.display()), e))?
-        }
-    };
-    config.validate().map_err(refusal)?;
-    config.fill_defaults();
-    Ok(config)
+    match config {
+        None => checked(REGISTRY.config(matcher).map_err(refusal)?),
+        Some(path) => config_file(&path),
+    }
 }
 
 /// An `anyhow` error as the command line prints it on one line.
