@@ -6,7 +6,7 @@ use crate::carmen::{CarmenOptions, CarmenReader};
 use crate::rosbag::{BagOptions, BagReader, OdometrySource, is_mcap};
 use qicp_core::Record;
 use std::io::BufRead;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// How to read a log of either format.
 #[derive(Debug, Clone, PartialEq)]
@@ -98,7 +98,7 @@ impl LogReader {
         match self {
             Self::Carmen(r) => LogError::empty(path, &r.info),
             Self::Bag(r) => LogError::Bag {
-                path: PathBuf::from(path).display().to_string(),
+                path: path.display().to_string(),
                 why: format!("no laser records; topics: {}", r.info().topic_list()),
             },
         }
