@@ -73,13 +73,11 @@ impl BagArgs {
     /// The reader options these arguments give, with the CARMEN ones.
     #[must_use]
     pub fn log_options(&self, carmen: CarmenOptions) -> LogOptions {
-        let odometry = match &self.odom_frame {
-            Some(odom_frame) => OdometrySource::Tf {
-                odom_frame: odom_frame.clone(),
-                base_frame: self.base_frame.clone(),
-            },
-            None => OdometrySource::Topic(self.odom_topic.clone()),
-        };
+        let odometry = OdometrySource::from_names(
+            &self.odom_topic,
+            self.odom_frame.as_deref(),
+            &self.base_frame,
+        );
         let max_beams = carmen.max_beams;
         LogOptions {
             carmen,

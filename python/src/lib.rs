@@ -492,13 +492,7 @@ fn read_bag(
         };
         return Err(QicpError::new_err(format!("{}: {why}", path.display())));
     }
-    let odometry = match odom_frame {
-        Some(odom_frame) => OdometrySource::Tf {
-            odom_frame,
-            base_frame: base_frame.to_string(),
-        },
-        None => OdometrySource::Topic(odom_topic.to_string()),
-    };
+    let odometry = OdometrySource::from_names(odom_topic, odom_frame.as_deref(), base_frame);
     let options = LogOptions {
         bag: BagOptions {
             max_beams,

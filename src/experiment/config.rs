@@ -103,18 +103,11 @@ impl SourceConfig {
     #[must_use]
     pub fn log_options(&self) -> crate::logs::LogOptions {
         use crate::logs::rosbag::{BagOptions, OdometrySource};
-        let odometry = match &self.odom_frame {
-            Some(odom_frame) => OdometrySource::Tf {
-                odom_frame: odom_frame.clone(),
-                base_frame: self
-                    .base_frame
-                    .clone()
-                    .unwrap_or_else(|| "base_link".into()),
-            },
-            None => {
-                OdometrySource::Topic(self.odom_topic.clone().unwrap_or_else(|| "/odom".into()))
-            }
-        };
+        let odometry = OdometrySource::from_names(
+            self.odom_topic.as_deref().unwrap_or("/odom"),
+            self.odom_frame.as_deref(),
+            self.base_frame.as_deref().unwrap_or("base_link"),
+        );
         crate::logs::LogOptions {
             carmen: CarmenOptions {
                 lenient: self.lenient,

@@ -25,6 +25,21 @@ pub enum OdometrySource {
     },
 }
 
+impl OdometrySource {
+    /// From /tf when an odometry frame is given (to `base_frame`), else from `odom_topic`: the
+    /// choice `--odom-topic` / `--odom-frame --base-frame` makes on the command line.
+    #[must_use]
+    pub fn from_names(odom_topic: &str, odom_frame: Option<&str>, base_frame: &str) -> Self {
+        match odom_frame {
+            Some(odom_frame) => Self::Tf {
+                odom_frame: odom_frame.to_string(),
+                base_frame: base_frame.to_string(),
+            },
+            None => Self::Topic(odom_topic.to_string()),
+        }
+    }
+}
+
 /// How to read a bag.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BagOptions {
