@@ -9,6 +9,7 @@ use crate::index::{IndexError, SpatialIndex};
 use crate::{Pose2, Scan};
 use nalgebra::{Matrix2, Point2, Vector2};
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 
 /// Range and bearing noise of a laser (Pfister et al. 2002, Sec. III).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -146,12 +147,51 @@ fn linearity(sxx: f64, sxy: f64, syy: f64, n: usize, sigma: f64) -> f64 {
     (2.0 - 0.5 * spread / sigma).clamp(0.0, 1.0)
 }
 
+/// How a scan is merged into a map (see [`Reference::insert_scan`]): the two density bounds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Merge {
+    /// A new point closer than this to one held is not inserted (m); 0 keeps every point.
+    pub resolution: f64,
+    /// The cell cap, if any: the map is divided into square cells of this side (m)…
+    pub cell_size: f64,
+    /// … and a cell holding this many points takes no more (0: no cap). A cell crossed by a
+    /// wall fills with the first passes' samples of it; later passes that land a little off
+    /// the wall add nothing there, so the map grows with the area explored, not with time.
+    pub max_cell_points: u32,
+}
+
+impl Merge {
+    /// Only the minimum spacing, no cell cap.
+    #[must_use]
+    pub fn spacing(resolution: f64) -> Self {
+        Self {
+            resolution,
+            cell_size: 0.0,
+            max_cell_points: 0,
+        }
+    }
+
+    /// The cell holding `p` when the cell cap is on. Points are finite and within
+    /// ±2³¹ m ([`crate::index::check_point`]) and cells are at least a millimetre wide
+    /// (`cell_size` is validated by the config), so the cell coordinates fit an `i64`.
+    fn cell(&self, p: &Point2<f64>) -> Option<(i64, i64)> {
+        (self.max_cell_points > 0 && self.cell_size > 0.0).then(|| {
+            (
+                (p.x / self.cell_size).floor() as i64,
+                (p.y / self.cell_size).floor() as i64,
+            )
+        })
+    }
+}
+
 /// A spatial index of reference points with a [`PointInfo`] per point.
 #[derive(Debug, Clone, Default)]
 pub struct Reference<I> {
     index: I,
     info: Vec<PointInfo>,
     scans: usize,
+    /// Points per cell of the cell cap ([`Merge::max_cell_points`]).
+    cells: HashMap<(i64, i64), u32>,
 }
 
 impl<I: SpatialIndex> Reference<I> {
@@ -162,6 +202,7 @@ impl<I: SpatialIndex> Reference<I> {
             index,
             info: Vec::new(),
             scans: 0,
+            cells: HashMap::new(),
         }
     }
 
@@ -221,22 +262,24 @@ impl<I: SpatialIndex> Reference<I> {
         self.index.clear();
         self.info.clear();
         self.scans = 0;
+        self.cells.clear();
     }
 
     /// Inserts the points of `scan`, seen from `pose` (the laser's pose in the reference frame).
     ///
-    /// `merge` is `None` for a plain insertion (a scan as reference). With `Some(resolution)`
+    /// `merge` is `None` for a plain insertion (a scan as reference). With `Some(merge)`
     /// the scan is merged into a map: each new point's spacing is lowered to its distance from
     /// the nearest point already held (and that point's likewise), so a surface seen many times
-    /// reports the finer sampling it now has; a new point closer than `resolution` to one held
-    /// is not inserted (0 keeps every point). Returns the number of points inserted; on error
-    /// nothing is inserted.
+    /// reports the finer sampling it now has; a new point closer than `merge.resolution` to one
+    /// held is not inserted (0 keeps every point), nor one whose cell is full
+    /// ([`Merge::max_cell_points`]). Returns the number of points inserted; on error nothing
+    /// is inserted.
     pub fn insert_scan(
         &mut self,
         scan: &Scan,
         pose: &Pose2,
         noise: &LaserNoise,
-        merge: Option<f64>,
+        merge: Option<Merge>,
     ) -> Result<usize, IndexError> {
         let local = scan_point_info(scan, noise);
         let rot = pose.rotation();
@@ -257,7 +300,9 @@ impl<I: SpatialIndex> Reference<I> {
                 covariance: rot * seen.covariance * rot.transpose(),
                 linearity: seen.linearity,
             };
-            if let Some(resolution) = merge {
+            let mut cell = None;
+            if let Some(merge) = merge {
+                let resolution = merge.resolution;
                 let reach = info.spacing.max(resolution);
                 if let Some(n) = self.index.nearest_within(p, reach * reach) {
                     let d = n.dist_sq.sqrt().max(1e-4);
@@ -268,8 +313,17 @@ impl<I: SpatialIndex> Reference<I> {
                         continue;
                     }
                 }
+                cell = merge.cell(p);
+                if cell.is_some_and(|c| {
+                    self.cells.get(&c).copied().unwrap_or(0) >= merge.max_cell_points
+                }) {
+                    continue;
+                }
             }
             self.index.insert(*p)?;
+            if let Some(c) = cell {
+                *self.cells.entry(c).or_insert(0) += 1;
+            }
             self.info.push(info);
             inserted += 1;
         }

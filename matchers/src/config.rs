@@ -496,6 +496,7 @@ const STEERING_COMMON: &[&str] = &[
     "relevance.tau_max",
     "relevance.rho_max_deg",
     "relevance.map_resolution",
+    "relevance.max_cell_points",
     "relevance.min_novelty",
     "relevance.novelty_distance",
     "motion.sigma_xy_per_m",
@@ -503,15 +504,24 @@ const STEERING_COMMON: &[&str] = &[
     "validation.inlier_distance",
     "validation.max_share_drop",
     "validation.max_residual_ratio",
+    "validation.max_odometry_chi2",
     "correlative.window_xy",
     "correlative.window_deg",
+];
+
+/// Steering parameters that act only through another one: each is left out of the sweep
+/// while the parameter it serves is 0 (off), as scaling it would change nothing.
+const SERVES: &[(&str, &str)] = &[
+    ("relevance.novelty_distance", "relevance.min_novelty"),
+    ("relevance.cell_size", "relevance.max_cell_points"),
 ];
 
 impl MatcherConfig {
     /// The numeric parameters that steer this matcher (correspondence distances, relevance
     /// thresholds, the map's density bound, the noise and motion models, and the algorithm's
     /// own steering parameters), as dotted keys such as `"matcher.icp.max_dist_start"`.
-    /// Parameters whose value is 0 are left out: scaling them changes nothing.
+    /// Parameters whose value is 0 are left out: scaling them changes nothing; so are those
+    /// that serve a parameter which is 0 (the novelty distance without the novelty gate).
     #[must_use]
     pub fn steering_parameters(&self) -> Vec<String> {
         let Ok(value) = self.to_table() else {
@@ -529,6 +539,12 @@ impl MatcherConfig {
             .chain(own)
             .map(|k| format!("matcher.{k}"))
             .filter(|k| lookup(&value, k).is_some_and(|v| v != 0.0))
+            .filter(|k| {
+                SERVES.iter().all(|(key, served)| {
+                    k.strip_prefix("matcher.") != Some(key)
+                        || lookup(&value, &format!("matcher.{served}")).is_some_and(|v| v != 0.0)
+                })
+            })
             .collect()
     }
 

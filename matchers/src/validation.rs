@@ -18,7 +18,7 @@
 
 use crate::ConfigError;
 use crate::icp::positive;
-use qicp_core::{Point2, Pose2, Reference, SpatialIndex};
+use qicp_core::{Matrix3, Point2, Pose2, Reference, SpatialIndex, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -48,6 +48,14 @@ pub struct ValidationParams {
     /// matches is a change of scene (new ground, a crowd), not one wrong match, and the map
     /// must grow into it. Default 3.
     pub max_refusals: usize,
+    /// A match whose pose differs from the odometry prediction by more than this squared
+    /// Mahalanobis distance, under the motion model's covariance (`[matcher.motion]`), is
+    /// reported but withheld from the map until a match agrees with odometry again (0: off).
+    /// Default 16.3, the 99.9 % quantile of χ² with three degrees of freedom: a corridor
+    /// slide of decimetres, or a turn of many degrees odometry never made, would otherwise be
+    /// written into the map as a second copy of every wall. A match that snaps back onto the
+    /// map after drift is withheld too, once: the next scan, predicted from it, agrees.
+    pub max_odometry_chi2: f64,
 }
 
 impl Default for ValidationParams {
@@ -60,6 +68,7 @@ impl Default for ValidationParams {
             history: 25,
             search: true,
             max_refusals: 3,
+            max_odometry_chi2: 16.3,
         }
     }
 }
@@ -89,6 +98,10 @@ impl ValidationParams {
                 format!("{} must be in {MIN_HISTORY}..=10000", self.history),
             ));
         }
+        crate::icp::non_negative(
+            "matcher.validation.max_odometry_chi2",
+            self.max_odometry_chi2,
+        )?;
         if self.max_refusals == 0 {
             return Err(ConfigError::invalid(
                 "matcher.validation.max_refusals",
@@ -120,6 +133,10 @@ pub struct Check {
     /// reference is replaced all the same), and where the prediction explains the scan at
     /// least as well, the prediction stands.
     pub refused: bool,
+    /// The match disagreed with odometry beyond the motion model's uncertainty
+    /// ([`ValidationParams::max_odometry_chi2`]): its pose is reported, but it does not
+    /// enter a map.
+    pub withheld: bool,
 }
 
 impl Check {
@@ -129,6 +146,7 @@ impl Check {
         searched: false,
         recovered: false,
         refused: false,
+        withheld: false,
     };
 }
 
@@ -171,6 +189,23 @@ impl Validator {
             sorted: Vec::with_capacity(params.history),
             refusals: 0,
         }
+    }
+
+    /// True when `matched` differs from the odometry prediction `predicted` by more than
+    /// [`ValidationParams::max_odometry_chi2`] under the prior information `lambda` (both
+    /// poses in the reference frame, whose x-y information is isotropic); never when the
+    /// checks or this test are off.
+    #[must_use]
+    pub fn disagrees(&self, lambda: &Matrix3<f64>, predicted: &Pose2, matched: &Pose2) -> bool {
+        if !self.params.enabled || self.params.max_odometry_chi2 <= 0.0 {
+            return false;
+        }
+        let d = Vector3::new(
+            matched.x - predicted.x,
+            matched.y - predicted.y,
+            qicp_core::normalize_angle(matched.theta - predicted.theta),
+        );
+        d.dot(&(lambda * d)) > self.params.max_odometry_chi2
     }
 
     /// Share of `local` (scan points, laser frame) within `inlier_distance` of the reference

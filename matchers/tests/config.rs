@@ -162,6 +162,12 @@ fn steering_parameters_scale_one_at_a_time() {
             }
         }
     }
+    // A parameter that only serves one that is off is not swept; it is once that one is on.
+    let mut gated = MatcherConfig::defaults(MatcherKind::QWsm);
+    let novelty = "matcher.relevance.novelty_distance".to_string();
+    assert!(!gated.steering_parameters().contains(&novelty));
+    gated.relevance.min_novelty = 0.02;
+    assert!(gated.steering_parameters().contains(&novelty));
     let err = MatcherConfig::defaults(MatcherKind::QWsm)
         .scaled("matcher.icp.nope", 2.0)
         .unwrap_err();

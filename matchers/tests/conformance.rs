@@ -4,7 +4,7 @@
 
 use qicp_core::testdata::SyntheticWorld;
 use qicp_core::{
-    BruteForce, ClosestPoint, KdTree, LaserNoise, MutualNearest, Pose2, QuadTree, Reference,
+    BruteForce, ClosestPoint, KdTree, LaserNoise, Merge, MutualNearest, Pose2, QuadTree, Reference,
     ScanMatcher, SpatialIndex, normalize_angle,
 };
 use qicp_matchers::{IcpParams, Idc, IdcParams, Wsm, WsmParams};
@@ -91,7 +91,7 @@ fn recovers_pose_in_map<M: ScanMatcher, I: SpatialIndex + Default>(mut matcher: 
                 &case.world.scan(&pose, 0.005, 10 + k),
                 &pose,
                 &LaserNoise::default(),
-                Some(0.02),
+                Some(Merge::spacing(0.02)),
             )
             .unwrap();
             pose = pose * Pose2::new(0.2, 0.0, 0.03);

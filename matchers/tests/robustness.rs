@@ -104,12 +104,18 @@ fn a_start_twenty_degrees_off_is_recovered() {
 }
 
 /// A matcher that returns a wrong pose on its `at`-th call, as a match that converged into
-/// the wrong basin would.
+/// the wrong basin would: `wrong` turns the right pose into the wrong one.
 #[derive(Debug)]
 struct Sabotaged<M> {
     inner: M,
     calls: usize,
     at: usize,
+    wrong: fn(&Pose2) -> Pose2,
+}
+
+/// Off by 0.4 m and 0.3 m in the scan's frame, and turned by 15°.
+fn turned(p: &Pose2) -> Pose2 {
+    *p * Pose2::new(0.4, 0.3, 15f64.to_radians())
 }
 
 impl<M: ScanMatcher> ScanMatcher for Sabotaged<M> {
@@ -127,7 +133,7 @@ impl<M: ScanMatcher> ScanMatcher for Sabotaged<M> {
         let mut result = self.inner.match_with_prior(reference, scan, guess, prior);
         self.calls += 1;
         if self.calls == self.at {
-            result.pose = result.pose * Pose2::new(0.4, 0.3, 15f64.to_radians());
+            result.pose = (self.wrong)(&result.pose);
         }
         result
     }
@@ -136,6 +142,14 @@ impl<M: ScanMatcher> ScanMatcher for Sabotaged<M> {
 type Plain = Wsm<MutualNearest<QuadTree>>;
 
 fn sabotaged(at: usize, validation: ValidationParams) -> Pipeline<Sabotaged<Plain>, QuadTree> {
+    sabotaged_with(at, turned, validation)
+}
+
+fn sabotaged_with(
+    at: usize,
+    wrong: fn(&Pose2) -> Pose2,
+    validation: ValidationParams,
+) -> Pipeline<Sabotaged<Plain>, QuadTree> {
     let every_scan = Relevance {
         tau_max: 0.0,
         rho_max_deg: 0.0,
@@ -148,6 +162,7 @@ fn sabotaged(at: usize, validation: ValidationParams) -> Pipeline<Sabotaged<Plai
             inner: Plain::new(IcpParams::default(), WsmParams::default()),
             calls: 0,
             at,
+            wrong,
         },
         QuadTree::default(),
         Policy::Boosted(every_scan),
@@ -191,6 +206,51 @@ fn a_wrong_match_does_not_enter_the_map() {
         let e = pipeline.process(&record(k, truth(k)));
         assert_eq!(e.inserted, true, "scan {k}");
     }
+}
+
+/// Slid 0.4 m along the corridor's axis (world x): every point still lies on a wall.
+fn slid(p: &Pose2) -> Pose2 {
+    Pose2::new(0.4, 0.0, 0.0) * *p
+}
+
+#[test]
+fn a_slide_odometry_never_made_does_not_enter_the_map() {
+    // In a featureless corridor a slide along the axis keeps every point on a wall, so the
+    // share and residual checks pass it; only odometry (a 0.12 m step, σ 7.5 cm) can tell.
+    let corridor = SyntheticWorld::featureless_corridor();
+    let run = |chi2: f64| {
+        let gate = ValidationParams {
+            max_odometry_chi2: chi2,
+            ..ValidationParams::default()
+        };
+        let mut pipeline = sabotaged_with(12, slid, gate);
+        (0..20)
+            .map(|k| {
+                let before = pipeline.reference().len();
+                let e = pipeline.process(&record_in(&corridor, k, truth(k)));
+                (e, pipeline.reference().len() - before)
+            })
+            .collect::<Vec<_>>()
+    };
+    for (k, (e, added)) in run(ValidationParams::default().max_odometry_chi2)
+        .into_iter()
+        .enumerate()
+    {
+        assert!(!e.check.refused && !e.check.searched, "scan {k}: {e:?}");
+        if k == 11 {
+            // The 12th call matches scan 11: reported as matched, kept out of the map.
+            assert!(e.check.withheld && !e.inserted && added == 0, "{e:?}");
+            // (Along a featureless axis only odometry holds x, so even right matches drift by
+            // centimetres there.)
+            assert!(e.pose.x - truth(k).x > 0.3, "{e:?}");
+        } else {
+            // Good matches, and those that follow the slide as odometry does, go in.
+            assert!(!e.check.withheld && e.inserted, "scan {k}: {e:?}");
+        }
+    }
+    // With the gate off the slide enters the map.
+    let (e, added) = run(0.0).swap_remove(11);
+    assert!(!e.check.withheld && e.inserted && added > 0, "{e:?}");
 }
 
 #[test]
@@ -255,6 +315,7 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
         let mut config = MatcherConfig::defaults(kind);
         let cap = 0.02;
         config.relevance.map_resolution = Some(cap);
+        config.relevance.max_cell_points = 20;
         let mut pipeline = config.build().expect("builds");
         let mut after_loop = Vec::new();
         for k in 0..400 {
@@ -282,6 +343,19 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
                 );
             }
         }
+        // And the cell cap: no cell holds more than its share (counted one by one).
+        let size = config.relevance.cell_size;
+        let mut cells = std::collections::HashMap::new();
+        for p in points {
+            *cells
+                .entry(((p.x / size).floor() as i64, (p.y / size).floor() as i64))
+                .or_insert(0u32) += 1;
+        }
+        let fullest = cells.values().copied().max().unwrap_or(0);
+        assert!(
+            fullest <= config.relevance.max_cell_points,
+            "{kind}: a cell holds {fullest} points"
+        );
         println!("{kind}: map points after each loop {after_loop:?}");
     }
     // Without the cap the map grows with every loop.

@@ -71,6 +71,8 @@ pub struct MatchSummary {
     pub recovered: usize,
     /// Matches that stayed poor and did not enter the reference.
     pub refused: usize,
+    /// Matches that odometry contradicted: reported, but kept out of the map.
+    pub withheld: usize,
 }
 
 /// A matcher's whole run over a drive.
@@ -182,6 +184,7 @@ struct RunTotals {
     searched: usize,
     recovered: usize,
     refused: usize,
+    withheld: usize,
 }
 
 impl RunTotals {
@@ -212,6 +215,7 @@ impl RunTotals {
         self.searched += usize::from(r.check.searched);
         self.recovered += usize::from(r.check.recovered);
         self.refused += usize::from(r.check.refused);
+        self.withheld += usize::from(r.check.withheld);
     }
 
     fn summary(&self, matcher: &str, busy: std::time::Duration, map_points: usize) -> MatchSummary {
@@ -232,6 +236,7 @@ impl RunTotals {
             searched: self.searched,
             recovered: self.recovered,
             refused: self.refused,
+            withheld: self.withheld,
         }
     }
 }
@@ -385,12 +390,19 @@ pub fn run_matcher(
     Ok(matching.finish())
 }
 
-/// The `check` column of `matches.csv`: `refused`, `recovered`, `searched` or empty.
+/// The `check` column of `matches.csv`: `refused`, `recovered`, `searched`, `withheld` or
+/// empty.
 fn check_label(check: &Check) -> &'static str {
-    match (check.refused, check.recovered, check.searched) {
-        (true, _, _) => "refused",
-        (false, true, _) => "recovered",
-        (false, false, true) => "searched",
+    match (
+        check.refused,
+        check.recovered,
+        check.searched,
+        check.withheld,
+    ) {
+        (true, _, _, _) => "refused",
+        (false, true, _, _) => "recovered",
+        (false, false, true, _) => "searched",
+        (false, false, false, true) => "withheld",
         _ => "",
     }
 }

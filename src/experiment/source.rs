@@ -175,6 +175,7 @@ impl MatcherOutcome {
             ("searched", json!(s.searched)),
             ("recovered", json!(s.recovered)),
             ("refused", json!(s.refused)),
+            ("withheld", json!(s.withheld)),
             ("matching_seconds", json!(s.wall_seconds)),
         ] {
             m.insert(k.into(), v);
