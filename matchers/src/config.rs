@@ -497,6 +497,7 @@ const STEERING_COMMON: &[&str] = &[
     "relevance.rho_max_deg",
     "relevance.map_resolution",
     "relevance.max_cell_points",
+    "relevance.window_scans",
     "relevance.min_novelty",
     "relevance.novelty_distance",
     "motion.sigma_xy_per_m",

@@ -10,6 +10,7 @@ use qicp_core::{
     ScanMatcher, SpatialIndex,
 };
 use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
 
 /// Alg. 1's relevance thresholds (TOML section `[matcher.relevance]`): which scans enter
 /// the reference. Boosted pipelines add relevant scans to the map; incremental ones replace
@@ -52,6 +53,13 @@ pub struct Relevance {
     /// instead of 165k, but the robustness sweep finds twice as many fragile variants: a
     /// full cell keeps the first copy of its wall, right or wrong (see the README).
     pub max_cell_points: u32,
+    /// A boosted map holds only the most recent relevant scans: at least this many and at
+    /// most half as many again (it is rebuilt from the newest `window_scans` when it reaches
+    /// 1.5 × that), so memory and per-scan time stay bounded on a drive of any length, at the
+    /// price of the places left behind: a loop longer than the window is matched against
+    /// its own recent scans, not against its start. 0 keeps every relevant scan, as Alg. 1
+    /// reads. Default 0.
+    pub window_scans: usize,
 }
 
 /// Smallest and largest cell of the cell cap (m): cells finer than a millimetre would cap
@@ -59,6 +67,9 @@ pub struct Relevance {
 const MIN_CELL_SIZE: f64 = 1e-3;
 /// See [`MIN_CELL_SIZE`].
 const MAX_CELL_SIZE: f64 = 1e3;
+/// Largest map window (scans): far beyond any log's relevant scans (Intel has 4,000), small
+/// enough that the window's arithmetic cannot overflow.
+const MAX_WINDOW_SCANS: usize = 1_000_000;
 
 impl Default for Relevance {
     fn default() -> Self {
@@ -70,6 +81,7 @@ impl Default for Relevance {
             novelty_distance: 0.05,
             cell_size: 0.1,
             max_cell_points: 0,
+            window_scans: 0,
         }
     }
 }
@@ -99,6 +111,12 @@ impl Relevance {
                     "{} must lie in [{MIN_CELL_SIZE}, {MAX_CELL_SIZE}]",
                     self.cell_size
                 ),
+            ));
+        }
+        if self.window_scans > MAX_WINDOW_SCANS {
+            return Err(ConfigError::invalid(
+                "matcher.relevance.window_scans",
+                format!("{} must be at most {MAX_WINDOW_SCANS}", self.window_scans),
             ));
         }
         Ok(())
@@ -264,6 +282,9 @@ pub struct Pipeline<M, I> {
     last: Option<(Pose2, Pose2)>,
     /// Laser pose of the last scan inserted into the map.
     last_inserted: Option<Pose2>,
+    /// The scans of a windowed map ([`Relevance::window_scans`]) and their laser poses,
+    /// oldest first.
+    window: VecDeque<(qicp_core::Scan, Pose2)>,
     /// The check before insertion, and its search.
     validator: Validator,
     search: CorrelativeSearch,
@@ -292,6 +313,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             reference_frame: Pose2::IDENTITY,
             last: None,
             last_inserted: None,
+            window: VecDeque::new(),
             validator: Validator::new(ValidationParams::default()),
             search: CorrelativeSearch::new(CorrelativeParams::default()),
         }
@@ -422,14 +444,25 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     return false;
                 }
                 // paper Alg. 1: insert all scan points of s_global into Q_t
-                self.reference
-                    .insert_scan(
-                        &record.scan,
-                        laser,
-                        &self.noise,
-                        Some(relevance.merge(self.matcher.map_resolution())),
-                    )
-                    .is_ok()
+                let merge = Some(relevance.merge(self.matcher.map_resolution()));
+                let inserted = self
+                    .reference
+                    .insert_scan(&record.scan, laser, &self.noise, merge)
+                    .is_ok();
+                if inserted && relevance.window_scans > 0 {
+                    self.window.push_back((record.scan.clone(), *laser));
+                    let keep = relevance.window_scans;
+                    if self.window.len() >= keep + keep.div_ceil(2) {
+                        // Rebuilt from the newest scans, merged in their order as they were.
+                        self.window.drain(..self.window.len() - keep);
+                        self.reference.clear();
+                        for (scan, pose) in &self.window {
+                            // These points were finite when first inserted.
+                            let _ = self.reference.insert_scan(scan, pose, &self.noise, merge);
+                        }
+                    }
+                }
+                inserted
             }
         };
         if ok {

@@ -374,6 +374,43 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
 }
 
 #[test]
+fn a_windowed_map_holds_only_its_recent_scans_over_ten_loops() {
+    let world = SyntheticWorld::room();
+    let run = |window_scans: usize| {
+        let mut pipeline = Pipeline::new(
+            "q-wsm",
+            Plain::new(IcpParams::default(), WsmParams::default()),
+            QuadTree::default(),
+            Policy::Boosted(Relevance {
+                window_scans,
+                ..Relevance::default()
+            }),
+            LaserNoise::default(),
+        );
+        (0..400)
+            .map(|k| {
+                let e = pipeline.process(&loop_record(&world, k));
+                assert!(e.pose.distance(&on_loop(k)) < 0.05, "step {k}: {e:?}");
+                (pipeline.reference().scans(), pipeline.reference().len())
+            })
+            .collect::<Vec<_>>()
+    };
+    // Every step turns 9°, so every scan is relevant and enters the map.
+    let windowed = run(20);
+    for (k, &(scans, _)) in windowed.iter().enumerate() {
+        assert!(scans <= 30, "step {k}: {scans} scans in the map");
+        if k >= 20 {
+            assert!(scans >= 20, "step {k}: only {scans} scans in the map");
+        }
+    }
+    let most_points = windowed.iter().map(|w| w.1).max().unwrap_or(0);
+    // Without the window every scan stays.
+    let whole = run(0);
+    assert_eq!(whole.last().map(|w| w.0), Some(400));
+    println!("windowed map: at most {most_points} points");
+}
+
+#[test]
 fn revisits_add_nothing_to_a_map_with_the_novelty_gate() {
     let world = SyntheticWorld::room();
     let laps = |min_novelty: f64| {
