@@ -172,8 +172,9 @@ impl Merge {
     }
 
     /// The cell holding `p` when the cell cap is on. Points are finite and within
-    /// ±2³¹ m ([`crate::index::check_point`]) and cells are at least a millimetre wide
-    /// (`cell_size` is validated by the config), so the cell coordinates fit an `i64`.
+    /// ±2³¹ m ([`crate::index::check_point`]) and configs hold cells to at least a
+    /// millimetre, so the cell coordinates fit an `i64`; a narrower cell given through this
+    /// API saturates the cast (cells far out alias) rather than panicking.
     fn cell(&self, p: &Point2<f64>) -> Option<(i64, i64)> {
         (self.max_cell_points > 0 && self.cell_size > 0.0).then(|| {
             (
