@@ -56,12 +56,11 @@ pub fn run(args: SweepArgs) -> Result<()> {
     eprintln!(
         "sweeping {} on {} scans: default + {} variants, {jobs} at a time",
         config.kind(),
-        input.records.len(),
+        input.scans,
         variants.len()
     );
     let (default, reports) = run_sweep(
-        &input.records,
-        &input.relations,
+        &input,
         &config,
         &variants,
         jobs,

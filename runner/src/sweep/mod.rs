@@ -15,20 +15,20 @@
 //! sweep reports the worst and the median ratio. The runs are spread over worker threads; each
 //! run is deterministic, so the figures (all but the wall times) do not depend on `--jobs`.
 
-use crate::matching::run_matcher;
+use crate::matching::MatchLoop;
 use anyhow::{Context, Result, bail};
 use qicp_core::{BeamGeometry, BeamStatus, Pose2, Record, Scan, ScanError};
 use qicp_eval::stats::median;
-use qicp_eval::{RelationError, evaluate_relations, relation_errors};
+use qicp_eval::{RelationError, RelationProbe, evaluate_relations, relation_errors};
+use qicp_io::carmen::CarmenOptions;
 use qicp_io::relations::{Relation, read_relations};
-use qicp_io::tum::Stamped;
+use qicp_io::{LogOptions, LogReader};
 use qicp_matchers::MatcherConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
-use std::borrow::Cow;
 use std::num::NonZeroUsize;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
@@ -113,11 +113,11 @@ pub fn plan(config: &MatcherConfig, variants: &[Variant]) -> Vec<Job> {
         .collect()
 }
 
-/// Sweeps `variants` of the matcher `config` over `records`, scored with `relations`, with
-/// `jobs` runs at a time; `progress` hears of each run as it finishes (name, result, time).
+/// Sweeps `variants` of the matcher `config` over the records of `input`, scored with its
+/// relations, with `jobs` runs at a time; `progress` hears of each run as it finishes (name,
+/// result, time). Every run reads the log afresh, so memory holds `jobs` maps and no log.
 pub fn sweep(
-    records: &[Record],
-    relations: &[Relation],
+    input: &SweepInput,
     config: &MatcherConfig,
     variants: &[Variant],
     jobs: usize,
@@ -127,7 +127,7 @@ pub fn sweep(
     let mut results = run_parallel(
         &jobs_list,
         jobs,
-        |job| job.run(records, relations),
+        |job| job.run(input),
         |i, result, elapsed| {
             if let Some(job) = jobs_list.get(i) {
                 progress(&job.name, result, elapsed);
@@ -147,32 +147,6 @@ pub fn sweep(
         .map(|(job, result)| variant_report(&job.name, result, &default))
         .collect();
     Ok((default, reports))
-}
-
-/// Checks that some relation has poses among `records` (by their timestamps), so that a
-/// relations file of another log fails before any matching.
-fn check_relations_cover(records: &[Record], relations: &[Relation], name: &str) -> Result<()> {
-    if relations.is_empty() {
-        bail!("{name} holds no relations");
-    }
-    let stamps: Vec<Stamped> = records
-        .iter()
-        .map(|r| (r.timestamp(), r.odometry))
-        .collect();
-    let (found, _) = relation_errors(&stamps, relations, MAX_DT)?;
-    if found.is_empty() {
-        let (first, last) = match (records.first(), records.last()) {
-            (Some(f), Some(l)) => (f.timestamp(), l.timestamp()),
-            _ => (f64::NAN, f64::NAN),
-        };
-        bail!(
-            "none of the {} relations of {name} falls within the {} scans used ({first} to \
-             {last} s): do they belong to this log?",
-            relations.len(),
-            records.len()
-        );
-    }
-    Ok(())
 }
 
 fn fmt_f(v: f64, decimals: usize) -> String {
@@ -258,21 +232,26 @@ pub fn table(report: &SweepReport) -> String {
     out
 }
 
-/// A sweep's inputs, read and checked: the log's first records and the relations.
+/// A sweep's inputs, checked: the log, read afresh by every run (so that memory holds no
+/// log), and the relations every run is scored with.
 #[derive(Debug)]
 pub struct SweepInput {
     /// The log, as named in reports.
     pub log: String,
-    /// The records the runs use.
-    pub records: Vec<Record>,
+    path: PathBuf,
+    options: LogOptions,
+    /// Records of the log the runs use.
+    pub scans: usize,
     /// The relations every run is scored with.
     pub relations: Vec<Relation>,
 }
 
 impl SweepInput {
-    /// Reads the relations, then the log (its first `scans` records): a CARMEN log (`lenient`
-    /// skips malformed lines) or a ROS 2 bag with scans on `/scan` and odometry on `/odom`, and checks that some relation falls within those records, so that a
-    /// relations file of another log fails before any matching.
+    /// Reads the relations, then streams the log once (its first `scans` records): a CARMEN
+    /// log (`lenient` skips malformed lines) or a ROS 2 bag with scans on `/scan` and odometry
+    /// on `/odom`. That pass counts the records and checks that some relation falls within
+    /// them, so that an unreadable log or the relations file of another log fails before any
+    /// matching.
     pub fn load(
         log: &Path,
         relations: &Path,
@@ -282,30 +261,62 @@ impl SweepInput {
         let relations_name = relations.display().to_string();
         let relations = read_relations(relations)
             .with_context(|| format!("reading relations {relations_name}"))?;
-        let mut records = if qicp_io::rosbag::is_mcap(log) {
-            // A ROS 2 bag (scans on /scan, odometry on /odom), streamed up to the scans used.
-            let mut reader = qicp_io::LogReader::open(log, &qicp_io::LogOptions::default())?;
-            let records = reader
-                .by_ref()
-                .take(scans.map_or(usize::MAX, NonZeroUsize::get))
-                .collect::<Result<Vec<_>, _>>()?;
-            reader.warn(log);
-            records
-        } else {
-            qicp_io::carmen::load_for_command(log, lenient)?.records
+        if relations.is_empty() {
+            bail!("{relations_name} holds no relations");
+        }
+        let options = LogOptions {
+            carmen: CarmenOptions {
+                lenient,
+                ..CarmenOptions::default()
+            },
+            ..LogOptions::default()
         };
-        if let Some(n) = scans {
-            records.truncate(n.get());
+        let mut probe = RelationProbe::new(&relations, MAX_DT)?;
+        let mut reader = LogReader::open(log, &options)?;
+        let mut count = 0;
+        let mut span = (f64::NAN, f64::NAN);
+        for record in reader
+            .by_ref()
+            .take(scans.map_or(usize::MAX, NonZeroUsize::get))
+        {
+            let record = record.with_context(|| format!("reading {}", log.display()))?;
+            probe.push(record.timestamp(), record.odometry)?;
+            if count == 0 {
+                span.0 = record.timestamp();
+            }
+            span.1 = record.timestamp();
+            count += 1;
         }
-        if records.is_empty() {
-            bail!("{} has no laser records", log.display());
+        reader.warn(log);
+        if count == 0 {
+            return Err(reader.empty(log).into());
         }
-        check_relations_cover(&records, &relations, &relations_name)?;
+        let (found, _) = relation_errors(&probe.trajectory(), &relations, MAX_DT)?;
+        if found.is_empty() {
+            bail!(
+                "none of the {} relations of {relations_name} falls within the {count} scans \
+                 used ({} to {} s): do they belong to this log?",
+                relations.len(),
+                span.0,
+                span.1
+            );
+        }
         Ok(Self {
             log: log.display().to_string(),
-            records,
+            path: log.to_path_buf(),
+            options,
+            scans: count,
             relations,
         })
+    }
+
+    /// The records the runs use, read afresh from the log, one at a time.
+    pub fn records(&self) -> Result<impl Iterator<Item = Result<Record>> + use<>> {
+        let reader = LogReader::open(&self.path, &self.options)
+            .with_context(|| format!("reading {}", self.path.display()))?;
+        Ok(reader
+            .take(self.scans)
+            .map(|r| r.map_err(anyhow::Error::from)))
     }
 }
 
@@ -330,7 +341,7 @@ pub fn report(
     SweepReport {
         log: input.log.clone(),
         matcher: config.kind(),
-        scans: input.records.len(),
+        scans: input.scans,
         relations_total: input.relations.len(),
         relations_over_0_5_m: default.relations_over_0_5_m,
         default,
@@ -393,6 +404,74 @@ mod tests {
         (0..=steps)
             .map(|i| Pose2::new(length * i as f64 / steps as f64, 0.0, 0.0))
             .collect()
+    }
+
+    /// A seeded random drive: wandering odometry, ranges with no-returns and invalid readings.
+    fn random_records(n: usize, seed: u64) -> Vec<Record> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut odometry = Pose2::new(1.0, -2.0, 0.3);
+        (0..n)
+            .map(|i| {
+                let step = Pose2::new(
+                    rng.random_range(0.0..0.3),
+                    rng.random_range(-0.05..0.05),
+                    rng.random_range(-0.2..0.2),
+                );
+                odometry = odometry.compose(&step);
+                let ranges = (0..37)
+                    .map(|_| match rng.random_range(0..10) {
+                        0 => -1.0,
+                        1 => 30.0,
+                        _ => rng.random_range(0.2..18.0),
+                    })
+                    .collect();
+                Record {
+                    scan: Scan::new(
+                        0.1 * i as f64,
+                        BeamGeometry::centered(37, 3.0, 20.0),
+                        ranges,
+                    )
+                    .expect("valid scan"),
+                    odometry,
+                    truth: None,
+                    laser_offset: Pose2::IDENTITY,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_streamed_input_variant_gives_the_records_of_the_whole_log_form() {
+        for seed in 0..3 {
+            let records = random_records(41, seed);
+            for variant in InputVariant::ALL {
+                let whole = variant.apply(&records).expect("applies");
+                let streamed: Vec<Record> = variant
+                    .stream(records.iter().cloned().map(Ok))
+                    .collect::<Result<_>>()
+                    .expect("streams");
+                assert_eq!(streamed, whole, "{} (seed {seed})", variant.name());
+                assert_ne!(streamed, records, "{} changed nothing", variant.name());
+            }
+        }
+    }
+
+    #[test]
+    fn a_streamed_input_variant_passes_errors_on_and_keeps_going() {
+        let records = random_records(6, 1);
+        let input = records.iter().enumerate().map(|(i, r)| {
+            if i == 2 {
+                Err(anyhow::anyhow!("bad line"))
+            } else {
+                Ok(r.clone())
+            }
+        });
+        let out: Vec<Result<Record>> = InputVariant::EveryOtherRecord.stream(input).collect();
+        // Records 0, 1, 3, 4, 5 count; 0, 3 and 5 are kept, and the error is not lost.
+        assert_eq!(out.len(), 4);
+        assert!(out[1].as_ref().is_err_and(|e| e.to_string() == "bad line"));
+        let kept: Vec<f64> = out.iter().flatten().map(Record::timestamp).collect();
+        assert_eq!(kept, [0.0, 0.1 * 3.0, 0.1 * 5.0]);
     }
 
     #[test]

@@ -81,26 +81,46 @@ impl Job {
         }
     }
 
-    /// Matches the (perturbed) records and scores the trajectory with `relations`.
-    pub fn run(&self, records: &[Record], relations: &[Relation]) -> Result<RunFigures> {
+    /// Matches the (perturbed) records of `input`, read afresh from its log, and scores the
+    /// trajectory with its relations.
+    pub fn run(&self, input: &SweepInput) -> Result<RunFigures> {
+        self.run_on(input.records()?, &input.relations)
+    }
+
+    /// Matches `records` (in time order, perturbed as the job says, one at a time) and scores
+    /// the trajectory with `relations`. Memory holds the matcher's map and the poses at the
+    /// relations' times, not the records or the trajectory.
+    pub fn run_on(
+        &self,
+        records: impl Iterator<Item = Result<Record>>,
+        relations: &[Relation],
+    ) -> Result<RunFigures> {
         let config = match &self.config {
             Ok(c) => c,
             Err(e) => bail!("{e}"),
         };
-        let records: Cow<'_, [Record]> = match self.input {
-            None => Cow::Borrowed(records),
-            Some(v) => Cow::Owned(v.apply(records)?),
+        let records: Box<dyn Iterator<Item = Result<Record>>> = match self.input {
+            None => Box::new(records),
+            Some(v) => Box::new(v.stream(records)),
         };
-        let run = run_matcher(&records, config, false)?;
-        let report = evaluate_relations(&run.trajectory, relations, MAX_DT)?;
-        let (errors, _) = relation_errors(&run.trajectory, relations, MAX_DT)?;
+        let mut matcher = MatchLoop::new(config)?;
+        let mut probe = RelationProbe::new(relations, MAX_DT)?;
+        for record in records {
+            let record = record?;
+            let (estimate, _) = matcher.push(&record);
+            probe.push(record.timestamp(), estimate.pose)?;
+        }
+        let summary = matcher.summary();
+        let trajectory = probe.trajectory();
+        let report = evaluate_relations(&trajectory, relations, MAX_DT)?;
+        let (errors, _) = relation_errors(&trajectory, relations, MAX_DT)?;
         Ok(RunFigures {
             trans_mean: report.trans_mean,
             trans_max: report.trans_max,
             rot_mean_deg: report.rot_mean_deg,
-            ms_per_scan_median: run.summary.ms_per_scan_median,
-            map_points: run.summary.map_points,
-            scans: run.summary.scans,
+            ms_per_scan_median: summary.ms_per_scan_median,
+            map_points: summary.map_points,
+            scans: summary.scans,
             relations: report.n,
             relations_missing: report.missing,
             relations_over_0_5_m: errors

@@ -71,6 +71,92 @@ impl InputVariant {
             InputVariant::MaxRange10 => scans(&mut |s| capped_range(s, CAPPED_MAX_RANGE)),
         }
     }
+
+    /// The records of a stream perturbed one at a time, as [`InputVariant::apply`] perturbs a
+    /// whole log: the same records, drawn from the same seeded generator in the same order.
+    pub fn stream<I: Iterator<Item = Result<Record>>>(self, records: I) -> Perturbed<I> {
+        Perturbed {
+            records,
+            variant: self,
+            rng: ChaCha8Rng::seed_from_u64(SEED),
+            read: 0,
+            odometry: None,
+        }
+    }
+}
+
+/// A stream of records under an [`InputVariant`] ([`InputVariant::stream`]).
+#[derive(Debug)]
+pub struct Perturbed<I> {
+    records: I,
+    variant: InputVariant,
+    rng: ChaCha8Rng,
+    /// Records read so far.
+    read: usize,
+    /// The last raw odometry and what replaced it (odometry variants).
+    odometry: Option<(Pose2, Pose2)>,
+}
+
+impl<I> Perturbed<I> {
+    /// The odometry replacing `raw`: the last replacement composed with the raw increment
+    /// passed through `perturb`, as [`perturb_increments`] recomposes a whole log.
+    fn drifted(
+        &mut self,
+        raw: Pose2,
+        perturb: impl FnOnce(Pose2, &mut ChaCha8Rng) -> Pose2,
+    ) -> Pose2 {
+        let out = match self.odometry {
+            Some((last_raw, last_out)) => {
+                last_out.compose(&perturb(last_raw.between(&raw), &mut self.rng))
+            }
+            None => raw,
+        };
+        self.odometry = Some((raw, out));
+        out
+    }
+}
+
+impl<I: Iterator<Item = Result<Record>>> Iterator for Perturbed<I> {
+    type Item = Result<Record>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            let mut record = match self.records.next()? {
+                Ok(r) => r,
+                Err(e) => return Some(Err(e)),
+            };
+            let index = self.read;
+            self.read += 1;
+            let name = self.variant.name();
+            let scan = match self.variant {
+                InputVariant::EveryOtherRecord if index % 2 == 1 => continue,
+                InputVariant::EveryOtherRecord => Ok(None),
+                InputVariant::EveryOtherBeam => every_other_beam(&record.scan).map(Some),
+                InputVariant::RangeNoise => {
+                    noisy_ranges(&record.scan, RANGE_NOISE_SIGMA, &mut self.rng).map(Some)
+                }
+                InputVariant::MaxRange10 => capped_range(&record.scan, CAPPED_MAX_RANGE).map(Some),
+                InputVariant::OdometryNoise => {
+                    record.odometry =
+                        self.drifted(record.odometry, |d, rng| noisy_increment(d, rng));
+                    Ok(None)
+                }
+                InputVariant::OdometryBias => {
+                    record.odometry = self.drifted(record.odometry, |d, _| biased_increment(d));
+                    Ok(None)
+                }
+            };
+            match scan {
+                Ok(Some(scan)) => record.scan = scan,
+                Ok(None) => {}
+                Err(e) => {
+                    return Some(Err(anyhow::Error::from(e)
+                        .context(format!("{name}: scan at {} s", record.timestamp()))));
+                }
+            }
+            return Some(Ok(record));
+        }
+    }
 }
 
 /// What a variant changes.
