@@ -1,0 +1,254 @@
+//! Validation: [`SimConfig::validate`] refuses values that cannot work, naming the key.
+
+use super::{ConfigError, ObstacleConfig, SimConfig, WorldKind};
+
+impl SimConfig {
+    /// Refuses values that cannot work, naming the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let w = &self.world;
+        if w.park.is_some() && w.kind != WorldKind::Park {
+            return invalid(
+                "world.park",
+                format!("is given but world.kind is \"{}\"", w.kind.name()),
+            );
+        }
+        if w.corridor.is_some() && w.kind != WorldKind::Corridor {
+            return invalid(
+                "world.corridor",
+                format!("is given but world.kind is \"{}\"", w.kind.name()),
+            );
+        }
+        match w.kind {
+            WorldKind::Park => self.validate_park()?,
+            WorldKind::Corridor => self.validate_corridor()?,
+            WorldKind::Custom => {
+                if self.drive.waypoints.is_none() {
+                    return invalid(
+                        "drive.waypoints",
+                        "is required with world.kind = \"custom\"".into(),
+                    );
+                }
+            }
+        }
+        for o in &w.obstacles {
+            validate_obstacle(o)?;
+        }
+        self.validate_robot()?;
+        self.validate_laser()?;
+        self.validate_drive()
+    }
+
+    fn validate_park(&self) -> Result<(), ConfigError> {
+        let p = self.park();
+        positive("world.park.size", p.size[0].min(p.size[1]))?;
+        let [r0, r1] = p.tree_radius;
+        if !(r0.is_finite() && r1.is_finite() && r0 > 0.0 && r0 <= r1) {
+            return invalid(
+                "world.park.tree_radius",
+                format!("is [{r0}, {r1}]: needs 0 < min <= max"),
+            );
+        }
+        non_negative("world.park.route_clearance", p.route_clearance)?;
+        non_negative("world.park.route_wiggle", p.route_wiggle)?;
+        positive("world.park.route_margin", p.route_margin)?;
+        if 2.0 * p.route_margin >= p.size[0].min(p.size[1]) {
+            return invalid(
+                "world.park.route_margin",
+                format!("is {}: the loop does not fit in the park", p.route_margin),
+            );
+        }
+        Ok(())
+    }
+
+    fn validate_corridor(&self) -> Result<(), ConfigError> {
+        let c = self.corridor();
+        positive("world.corridor.size", c.size[0].min(c.size[1]))?;
+        positive("world.corridor.corridor_width", c.corridor_width)?;
+        positive("world.corridor.outer_room_depth", c.outer_room_depth)?;
+        positive("world.corridor.inner_room_depth", c.inner_room_depth)?;
+        positive("world.corridor.room_width", c.room_width)?;
+        positive("world.corridor.door_width", c.door_width)?;
+        positive("world.corridor.wall_thickness", c.wall_thickness)?;
+        positive("world.corridor.zigzag_period", c.zigzag_period)?;
+        non_negative("world.corridor.zigzag_amplitude", c.zigzag_amplitude)?;
+        let core = c.size[0].min(c.size[1])
+            - 2.0 * (c.outer_room_depth + c.corridor_width + c.inner_room_depth);
+        if core <= 0.0 {
+            return invalid(
+                "world.corridor.size",
+                "is too small for the corridor and its rooms".into(),
+            );
+        }
+        if c.door_width >= c.room_width {
+            return invalid(
+                "world.corridor.door_width",
+                "must be smaller than room_width".into(),
+            );
+        }
+        let half_free = c.corridor_width / 2.0 - self.robot.size[1].max(self.robot.size[0]) / 2.0;
+        if c.zigzag_amplitude >= half_free {
+            return invalid(
+                "world.corridor.zigzag_amplitude",
+                format!(
+                    "is {}: the robot would touch the corridor walls (at most {half_free:.2})",
+                    c.zigzag_amplitude
+                ),
+            );
+        }
+        Ok(())
+    }
+
+    fn validate_robot(&self) -> Result<(), ConfigError> {
+        let r = &self.robot;
+        positive("robot.mass", r.mass)?;
+        positive("robot.size", r.size[0].min(r.size[1]))?;
+        positive("robot.wheel_base", r.wheel_base)?;
+        positive("robot.max_wheel_speed", r.max_wheel_speed)?;
+        positive("robot.max_wheel_accel", r.max_wheel_accel)?;
+        positive("robot.ground_friction", r.ground_friction)?;
+        non_negative("robot.rolling_resistance", r.rolling_resistance)?;
+        if r.rolling_resistance >= r.ground_friction {
+            return invalid(
+                "robot.rolling_resistance",
+                "must be below robot.ground_friction (the robot could not move)".into(),
+            );
+        }
+        positive("robot.tyre_slip", r.tyre_slip)?;
+        non_negative("robot.encoder_noise", r.encoder_noise)?;
+        for b in r.encoder_bias {
+            if !(b.is_finite() && b.abs() < 0.5) {
+                return invalid("robot.encoder_bias", format!("has {b}: needs |bias| < 0.5"));
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_laser(&self) -> Result<(), ConfigError> {
+        let l = &self.laser;
+        if l.beams == 0 {
+            return invalid(
+                "laser.beams",
+                "is 0: a laser needs at least one beam".into(),
+            );
+        }
+        if !(l.fov_deg.is_finite() && l.fov_deg > 0.0 && l.fov_deg <= 360.0) {
+            return invalid(
+                "laser.fov_deg",
+                format!("is {}: needs 0 < fov <= 360", l.fov_deg),
+            );
+        }
+        positive("laser.max_range", l.max_range)?;
+        non_negative("laser.min_range", l.min_range)?;
+        if l.min_range >= l.max_range {
+            return invalid("laser.min_range", "must be below laser.max_range".into());
+        }
+        non_negative("laser.range_sigma", l.range_sigma)?;
+        positive("laser.rate_hz", l.rate_hz)?;
+        if !l.offset_x.is_finite() {
+            return invalid("laser.offset_x", "must be finite".into());
+        }
+        Ok(())
+    }
+
+    fn validate_drive(&self) -> Result<(), ConfigError> {
+        let d = &self.drive;
+        if let Some(w) = &d.waypoints {
+            if w.len() < 2 {
+                return invalid(
+                    "drive.waypoints",
+                    format!("has {} point(s): needs at least 2", w.len()),
+                );
+            }
+            if w.iter().flatten().any(|v| !v.is_finite()) {
+                return invalid("drive.waypoints", "must be finite".into());
+            }
+            if w[0] == w[1] {
+                return invalid(
+                    "drive.waypoints",
+                    "starts with two equal points (no start heading)".into(),
+                );
+            }
+        }
+        positive("drive.speed", d.speed)?;
+        if d.speed > self.robot.max_wheel_speed {
+            return invalid(
+                "drive.speed",
+                format!(
+                    "is {} m/s, above robot.max_wheel_speed ({})",
+                    d.speed, self.robot.max_wheel_speed
+                ),
+            );
+        }
+        positive("drive.turn_rate_deg", d.turn_rate_deg)?;
+        positive("drive.accel", d.accel)?;
+        positive("drive.angular_accel_deg", d.angular_accel_deg)?;
+        positive("drive.waypoint_tolerance", d.waypoint_tolerance)?;
+        positive("drive.physics_hz", d.physics_hz)?;
+        if d.physics_hz < self.laser.rate_hz {
+            return invalid(
+                "drive.physics_hz",
+                "must be at least laser.rate_hz (one physics step per scan)".into(),
+            );
+        }
+        if d.physics_hz > 10_000.0 {
+            return invalid("drive.physics_hz", "is above 10000".into());
+        }
+        if d.max_scans == Some(0) {
+            return invalid("drive.max_scans", "is 0: nothing would be simulated".into());
+        }
+        positive("drive.timeout_s", d.timeout_s)
+    }
+}
+
+fn validate_obstacle(o: &ObstacleConfig) -> Result<(), ConfigError> {
+    let key = "world.obstacles";
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    match o {
+        ObstacleConfig::Circle { center, radius } => {
+            if !(finite(center) && radius.is_finite() && *radius > 0.0) {
+                return invalid(
+                    key,
+                    format!("has a circle with bad centre or radius {radius}"),
+                );
+            }
+        }
+        ObstacleConfig::Box {
+            center,
+            half_size,
+            angle_deg,
+        } => {
+            if !finite(center)
+                || !finite(&[*angle_deg])
+                || !half_size.iter().all(|h| h.is_finite() && *h > 0.0)
+            {
+                return invalid(key, "has a box with bad centre, half_size or angle".into());
+            }
+        }
+        ObstacleConfig::Wall { a, b, thickness } => {
+            if !(finite(a) && finite(b) && a != b && thickness.is_finite() && *thickness > 0.0) {
+                return invalid(key, "has a wall with bad ends or thickness".into());
+            }
+        }
+    }
+    Ok(())
+}
+
+fn invalid(key: &'static str, why: String) -> Result<(), ConfigError> {
+    Err(ConfigError::Invalid { key, why })
+}
+
+fn positive(key: &'static str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        invalid(key, format!("is {v}: must be finite and positive"))
+    }
+}
+
+fn non_negative(key: &'static str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        invalid(key, format!("is {v}: must be finite and non-negative"))
+    }
+}

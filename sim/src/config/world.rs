@@ -1,0 +1,172 @@
+//! `[world]`: the world kind, its procedural layouts (`[world.park]`, `[world.corridor]`)
+//! and explicit obstacles.
+
+use serde::{Deserialize, Serialize};
+
+/// Which world to build.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WorldKind {
+    /// An open park with sparse trees, rocks and benches (procedural, seeded).
+    #[default]
+    Park,
+    /// An office floor: a rectangular corridor loop with rooms on both sides (procedural).
+    Corridor,
+    /// Only the explicit `world.obstacles`; the route must be given as `drive.waypoints`.
+    Custom,
+}
+
+impl WorldKind {
+    /// The lowercase name used in configs.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            WorldKind::Park => "park",
+            WorldKind::Corridor => "corridor",
+            WorldKind::Custom => "custom",
+        }
+    }
+}
+
+/// `[world]`. Defaults: a park, seed 7, no extra obstacles.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorldConfig {
+    /// `park`, `corridor` or `custom`.
+    pub kind: WorldKind,
+    /// Seed of the procedural layout (tree positions, route wiggles).
+    pub seed: u64,
+    /// Park parameters (`[world.park]`); only allowed with `kind = "park"`.
+    pub park: Option<ParkConfig>,
+    /// Corridor parameters (`[world.corridor]`); only allowed with `kind = "corridor"`.
+    pub corridor: Option<CorridorConfig>,
+    /// Explicit obstacles, added to any world kind (`[[world.obstacles]]`).
+    pub obstacles: Vec<ObstacleConfig>,
+}
+
+impl Default for WorldConfig {
+    fn default() -> Self {
+        Self {
+            kind: WorldKind::Park,
+            seed: 7,
+            park: None,
+            corridor: None,
+            obstacles: Vec::new(),
+        }
+    }
+}
+
+/// `[world.park]`: an open area, the route a clockwise loop from the bottom-right corner.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ParkConfig {
+    /// Width and height of the park (m). Default 80 × 40.
+    pub size: [f64; 2],
+    /// Number of trees. Default 12.
+    pub trees: usize,
+    /// Smallest and largest trunk radius (m). Default 0.15–0.5.
+    pub tree_radius: [f64; 2],
+    /// Number of rocks (round, 0.3–0.8 m). Default 3.
+    pub rocks: usize,
+    /// Number of benches (1.6 × 0.5 m boxes). Default 2.
+    pub benches: usize,
+    /// Smallest free distance between the route and any obstacle surface (m). Default 2.5.
+    pub route_clearance: f64,
+    /// Distance of the loop from the park's edge (m). Default 6.
+    pub route_margin: f64,
+    /// Largest sideways wiggle of the loop's intermediate waypoints (m). Default 3.
+    pub route_wiggle: f64,
+}
+
+impl Default for ParkConfig {
+    fn default() -> Self {
+        Self {
+            size: [80.0, 40.0],
+            trees: 12,
+            tree_radius: [0.15, 0.5],
+            rocks: 3,
+            benches: 2,
+            route_clearance: 2.5,
+            route_margin: 6.0,
+            route_wiggle: 3.0,
+        }
+    }
+}
+
+/// `[world.corridor]`: a rectangular corridor loop, rooms with doorways on both sides, the
+/// route zigzagging between the corridor walls.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CorridorConfig {
+    /// Outer size of the floor (m). Default 30 × 30.
+    pub size: [f64; 2],
+    /// Free width of the corridor (m). Default 2.4.
+    pub corridor_width: f64,
+    /// Depth of the rooms on the outer side of the corridor (m). Default 5.
+    pub outer_room_depth: f64,
+    /// Depth of the rooms on the inner side of the corridor (m). Default 4.
+    pub inner_room_depth: f64,
+    /// Target width of a room along the corridor (m). Default 4.5.
+    pub room_width: f64,
+    /// Width of a doorway (m). Default 1.0.
+    pub door_width: f64,
+    /// Wall thickness (m). Default 0.1.
+    pub wall_thickness: f64,
+    /// Distance along the corridor between zigzag turning points (m). Default 3.
+    pub zigzag_period: f64,
+    /// Sideways offset of the zigzag turning points from the corridor centre (m). Default 0.5.
+    pub zigzag_amplitude: f64,
+}
+
+impl Default for CorridorConfig {
+    fn default() -> Self {
+        Self {
+            size: [30.0, 30.0],
+            corridor_width: 2.4,
+            outer_room_depth: 5.0,
+            inner_room_depth: 4.0,
+            room_width: 4.5,
+            door_width: 1.0,
+            wall_thickness: 0.1,
+            zigzag_period: 3.0,
+            zigzag_amplitude: 0.5,
+        }
+    }
+}
+
+/// One explicit obstacle (`[[world.obstacles]]`), tagged by `kind`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ObstacleConfig {
+    /// A round post or trunk.
+    Circle {
+        /// Centre (m).
+        center: [f64; 2],
+        /// Radius (m).
+        radius: f64,
+    },
+    /// A rectangle, rotated by `angle_deg` about its centre.
+    Box {
+        /// Centre (m).
+        center: [f64; 2],
+        /// Half width and half height (m).
+        half_size: [f64; 2],
+        /// Rotation (degrees, counter-clockwise).
+        #[serde(default)]
+        angle_deg: f64,
+    },
+    /// A straight wall from `a` to `b` (its centre line) of the given thickness.
+    Wall {
+        /// One end (m).
+        a: [f64; 2],
+        /// The other end (m).
+        b: [f64; 2],
+        /// Thickness (m); default 0.1.
+        #[serde(default = "default_wall_thickness")]
+        thickness: f64,
+    },
+}
+
+fn default_wall_thickness() -> f64 {
+    0.1
+}
