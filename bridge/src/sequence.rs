@@ -48,8 +48,9 @@ impl StreamEnd {
     }
 }
 
-/// What a subscriber saw of a stream, reported at its end.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+/// What a subscriber saw of a stream, reported at its end. It serialises with `end` as
+/// [`StreamEnd::name`] (`"running"` while the stream runs).
+#[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize)]
 pub struct StreamReport {
     /// Data messages received.
     pub received: u64,
@@ -71,7 +72,12 @@ pub struct StreamReport {
     /// The number of messages the publisher announced in its end-of-stream marker.
     pub announced: Option<u64>,
     /// How the stream ended (`None` while it runs).
+    #[serde(serialize_with = "end_name")]
     pub end: Option<StreamEnd>,
+}
+
+fn end_name<S: serde::Serializer>(end: &Option<StreamEnd>, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(end.map_or("running", StreamEnd::name))
 }
 
 impl StreamReport {

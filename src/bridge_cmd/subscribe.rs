@@ -42,66 +42,22 @@ pub struct SubscribeArgs {
     pub delay_ms: u64,
 }
 
-/// The bridge figures added to `summary.json` under `"bridge"`.
+/// The bridge figures added to `summary.json` under `"bridge"`: the service, its mode, the
+/// subscriber's [`StreamReport`] (how the stream ended, what was received, lost or ignored)
+/// and what the matcher made of it.
 #[derive(Debug, Clone, Serialize)]
 pub struct SubscribeSummary {
     /// The scan service.
     pub service: String,
     /// The service's back-pressure mode.
     pub backpressure: String,
-    /// How the stream ended (`end_of_stream`, `publisher_lost`, `no_publisher`, `idle`,
-    /// `interrupted`).
-    pub end: String,
-    /// Scans received.
-    pub received: u64,
-    /// Scans sent before this subscriber joined that it did not get.
-    pub missed_before_join: u64,
-    /// Jumps in the sequence numbers.
-    pub gap_events: u64,
-    /// Scans lost in them.
-    pub missing: u64,
-    /// Scans received out of order (ignored).
-    pub out_of_order: u64,
-    /// Publishers seen (a restart counts again).
-    pub publishers_seen: u64,
-    /// Publishers that vanished without an end-of-stream marker.
-    pub publishers_lost: u64,
-    /// Messages of a second publisher, sent while the first was connected: ignored, never
-    /// mixed in (any makes the run fail).
-    pub intruders: u64,
-    /// Scans the last publisher announced in its end marker.
-    pub announced: Option<u64>,
+    /// What the subscriber saw of the stream.
+    #[serde(flatten)]
+    pub stream: StreamReport,
     /// Scans whose message could not be turned into a scan (bad geometry, NaN time).
     pub rejected: u64,
     /// Poses published on `<prefix>/pose`.
     pub poses_published: u64,
-}
-
-impl SubscribeSummary {
-    fn of(
-        report: &StreamReport,
-        service: String,
-        backpressure: BackPressure,
-        rejected: u64,
-        poses: u64,
-    ) -> Self {
-        Self {
-            service,
-            backpressure: backpressure.name().to_string(),
-            end: report.end.map_or("running", StreamEnd::name).to_string(),
-            received: report.received,
-            missed_before_join: report.missed_before_join,
-            gap_events: report.gap_events,
-            missing: report.missing,
-            out_of_order: report.out_of_order,
-            publishers_seen: report.publishers_seen,
-            publishers_lost: report.publishers_lost,
-            intruders: report.intruders,
-            announced: report.announced,
-            rejected,
-            poses_published: poses,
-        }
-    }
 }
 
 /// Runs `qicp match --subscribe`: matches every scan received, publishes its pose, and at the
@@ -217,7 +173,13 @@ pub fn run_subscribe(
     }
     poses.end_of_stream().context("ending the pose stream")?;
 
-    let bridge = SubscribeSummary::of(&report, topics.scan(), backpressure, rejected, poses.sent());
+    let bridge = SubscribeSummary {
+        service: topics.scan(),
+        backpressure: backpressure.name().to_string(),
+        stream: report.clone(),
+        rejected,
+        poses_published: poses.sent(),
+    };
     let mut summary = serde_json::to_value(matching.summary())?;
     summary["bridge"] = serde_json::to_value(&bridge)?;
     let text = serde_json::to_string_pretty(&summary)?;
