@@ -1,0 +1,162 @@
+//! IDC's parameters ([`IdcParams`], TOML section `[matcher.idc]`) and its registry entry
+//! ([`IdcAlgorithm`]).
+
+use super::Idc;
+use crate::ConfigError;
+use crate::icp::IcpParams;
+use crate::params::{Param, Range, check_section};
+use crate::registry::{Algorithm, Metric};
+use qicp_core::Matrix3;
+use serde::{Deserialize, Serialize};
+
+/// IDC's own parameters (TOML section `[matcher.idc]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IdcParams {
+    /// Half-width of the matching-range rule's angular window in the first iteration (deg).
+    /// Default 15.
+    pub window_start_deg: f64,
+    /// … shrinking with the gate down to this (deg). Default 1.
+    pub window_end_deg: f64,
+    /// With an odometry prior, the first window is this many of the prior's rotation standard
+    /// deviations instead (within window_end_deg…window_start_deg): Lu & Milios size Bw to the
+    /// rotation error they expect, and a window far wider than odometry's error only lets
+    /// the range rule jump to wrong rotations. 0 always starts at window_start_deg.
+    /// Default 2.
+    pub window_sigmas: f64,
+    /// With an odometry prior, the first gate is the narrowest of the schedule that still
+    /// holds this many of the prior's translation standard deviations (yet at least one
+    /// stage with a window wider than window_end_deg runs): the wide gates of the schedule
+    /// exist for large initial errors, and odometry says how large they can be. 0 always
+    /// starts at matcher.icp.max_dist_start. Default 5.
+    pub gate_sigmas: f64,
+    /// A stage whose window is still wider than window_end_deg ends once a step moves less
+    /// than this fraction of the gate and turns less than this fraction of the window: the
+    /// two rules never agree to 0.1 mm, and refining a wide stage is wasted work.
+    /// Default 0.02.
+    pub stage_tolerance: f64,
+    /// The last stage also settles when a step moves less than this (m)… Below it the steps
+    /// are the jitter of pairs switching between the overlapping samples of a map.
+    /// Default 0.001.
+    pub settle_translation: f64,
+    /// … and turns less than this (deg). Default 0.06.
+    pub settle_rotation_deg: f64,
+    /// Check the initial guess against the scan (squared distances of the points to the
+    /// reference surface, truncated at 5 cm): one that explains it very badly is not used as a
+    /// prior; after the iteration, when the guess explains the scan better than the result,
+    /// it is refined with the closest-point rule alone and whichever explains the scan best
+    /// is kept. One wrong match must not enter a map that is never forgotten. Default true.
+    pub verify: bool,
+}
+
+impl Default for IdcParams {
+    fn default() -> Self {
+        Self {
+            window_start_deg: 15.0,
+            window_end_deg: 1.0,
+            window_sigmas: 2.0,
+            gate_sigmas: 5.0,
+            stage_tolerance: 0.02,
+            settle_translation: 0.001,
+            settle_rotation_deg: 0.06,
+            verify: true,
+        }
+    }
+}
+
+/// IDC in the registry (`algorithm = "idc"`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct IdcAlgorithm;
+
+impl Algorithm for IdcAlgorithm {
+    const NAME: &'static str = "idc";
+    const SUMMARY: &'static str = "Iterative Dual Correspondence (Lu & Milios 1997)";
+    const PARAMETERS: &'static [Param] = &[
+        Param::steering(
+            "window_start_deg",
+            Range::Positive,
+            "half-width of the matching-range window in the first iteration (deg)",
+        ),
+        Param::new(
+            "window_end_deg",
+            Range::Positive,
+            "… shrinking down to this (deg)",
+        ),
+        Param::steering(
+            "window_sigmas",
+            Range::NonNegative,
+            "with a prior, the first window in its rotation σ (0: window_start_deg)",
+        ),
+        Param::steering(
+            "gate_sigmas",
+            Range::NonNegative,
+            "with a prior, the first gate holds this many translation σ (0: max_dist_start)",
+        ),
+        Param::new(
+            "stage_tolerance",
+            Range::Open(0.0, 1.0),
+            "a wide stage ends when a step is below this fraction of gate and window",
+        ),
+        Param::new(
+            "settle_translation",
+            Range::NonNegative,
+            "the last stage settles below this step (m)",
+        ),
+        Param::new(
+            "settle_rotation_deg",
+            Range::NonNegative,
+            "… and below this turn (deg)",
+        ),
+        Param::new(
+            "verify",
+            Range::Flag,
+            "check the guess against the scan and keep whichever explains it best",
+        ),
+    ];
+    type Params = IdcParams;
+    type Matcher<C: Metric> = Idc<C>;
+
+    fn matcher<C: Metric>(icp: IcpParams, params: &IdcParams) -> Idc<C> {
+        Idc::new(icp, *params)
+    }
+
+    fn check(params: &IdcParams) -> Result<(), ConfigError> {
+        if params.window_start_deg > 90.0 || params.window_end_deg > params.window_start_deg {
+            return Err(ConfigError::invalid(
+                "matcher.idc.window_end_deg",
+                "windows must satisfy 0 < window_end_deg ≤ window_start_deg ≤ 90",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl IdcParams {
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check_section("matcher.idc", self, IdcAlgorithm::PARAMETERS)?;
+        IdcAlgorithm::check(self)
+    }
+
+    /// The first window (deg): `window_sigmas` standard deviations of the prior's rotation
+    /// when there is a prior, clamped to the configured windows.
+    #[must_use]
+    pub fn first_window_deg(&self, prior: Option<&Matrix3<f64>>) -> f64 {
+        match prior {
+            Some(lambda) if self.window_sigmas > 0.0 && lambda[(2, 2)] > 0.0 => {
+                (self.window_sigmas / lambda[(2, 2)].sqrt())
+                    .to_degrees()
+                    .clamp(self.window_end_deg, self.window_start_deg)
+            }
+            _ => self.window_start_deg,
+        }
+    }
+
+    /// The level of the gate schedule to start at: with a prior, the last one whose gate
+    /// still holds `gate_sigmas` of its translation standard deviations, at most one before
+    /// the last level; 0 otherwise.
+    #[must_use]
+    pub fn first_level(&self, icp: &IcpParams, prior: Option<&Matrix3<f64>>) -> u32 {
+        icp.first_level(prior, self.gate_sigmas)
+    }
+}
