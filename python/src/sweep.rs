@@ -1,0 +1,150 @@
+//! The sweep of `qicp sweep`, one run at a time: its variants, one run's figures and the
+//! report of the runs' results (a distributed sweep's tasks).
+
+use crate::config::{checked, config_file};
+use crate::{QicpError, REGISTRY, refusal};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use qicp_matchers::MatcherConfig;
+use std::path::PathBuf;
+
+/// The matcher a sweep runs: the registry's `matcher`, or the `[matcher]` of a TOML file.
+fn sweep_config(matcher: &str, config: Option<PathBuf>) -> PyResult<MatcherConfig> {
+    match config {
+        None => checked(REGISTRY.config(matcher).map_err(refusal)?),
+        Some(path) => config_file(&path),
+    }
+}
+
+/// An `anyhow` error as the command line prints it on one line.
+fn anyhow_refusal(e: &anyhow::Error) -> PyErr {
+    QicpError::new_err(format!("{e:#}"))
+}
+
+fn sweep_input(
+    log: &std::path::Path,
+    relations: &std::path::Path,
+    scans: Option<usize>,
+    lenient: bool,
+) -> PyResult<qicp_runner::sweep::SweepInput> {
+    let scans = scans.and_then(std::num::NonZeroUsize::new);
+    qicp_runner::sweep::SweepInput::load(log, relations, scans, lenient)
+        .map_err(|e| anyhow_refusal(&e))
+}
+
+/// The variants `qicp sweep` runs for a matcher, in report order (the default run aside).
+#[pyfunction]
+#[pyo3(signature = (matcher = "q-wsm", *, config = None))]
+pub(crate) fn sweep_variants(matcher: &str, config: Option<PathBuf>) -> PyResult<Vec<String>> {
+    let config = sweep_config(matcher, config)?;
+    Ok(qicp_runner::sweep::all_variants(&config)
+        .into_iter()
+        .map(|v| v.name)
+        .collect())
+}
+
+/// One run of `qicp sweep`: `variant` (`"default"` or a name of `sweep_variants`) of the
+/// matcher on the log's first `scans` records, scored with the relations. Returns the run's
+/// figures (the keys of a variant in `qicp sweep --json`); a run that cannot be made raises
+/// `QicpError` with the message the sweep reports. Each call reads the log: one call is one
+/// task of a distributed sweep.
+#[pyfunction]
+#[pyo3(signature = (log, relations, variant = "default", *, matcher = "q-wsm", config = None,
+                    scans = None, lenient = false))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sweep_run<'py>(
+    py: Python<'py>,
+    log: PathBuf,
+    relations: PathBuf,
+    variant: &str,
+    matcher: &str,
+    config: Option<PathBuf>,
+    scans: Option<usize>,
+    lenient: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let config = sweep_config(matcher, config)?;
+    let job = qicp_runner::sweep::Job::named(&config, variant).map_err(|e| anyhow_refusal(&e))?;
+    let figures = py.detach(|| -> anyhow::Result<_> {
+        let input = qicp_runner::sweep::SweepInput::load(
+            &log,
+            &relations,
+            scans.and_then(std::num::NonZeroUsize::new),
+            lenient,
+        )?;
+        job.run(&input.records, &input.relations)
+    });
+    let figures = figures.map_err(|e| anyhow_refusal(&e))?;
+    let value = serde_json::to_value(&figures).map_err(refusal)?;
+    let d = PyDict::new(py);
+    if let serde_json::Value::Object(map) = value {
+        for (k, v) in map {
+            match v {
+                serde_json::Value::Number(n) if n.is_u64() => d.set_item(k, n.as_u64())?,
+                serde_json::Value::Number(n) => d.set_item(k, n.as_f64())?,
+                _ => d.set_item(k, f64::NAN)?,
+            }
+        }
+    }
+    Ok(d)
+}
+
+/// The report of `qicp sweep --json` from the runs' results: `results` maps each run's name
+/// (`"default"` and the variants, in report order) to its figures (a dict of `sweep_run`) or
+/// to the message of its failure. Returns the report's JSON text, as `qicp sweep --json`
+/// prints it.
+#[pyfunction]
+#[pyo3(signature = (log, relations, results, *, matcher = "q-wsm", config = None, scans = None,
+                    lenient = false))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sweep_report(
+    py: Python<'_>,
+    log: PathBuf,
+    relations: PathBuf,
+    results: Vec<(String, Bound<'_, PyAny>)>,
+    matcher: &str,
+    config: Option<PathBuf>,
+    scans: Option<usize>,
+    lenient: bool,
+) -> PyResult<String> {
+    use qicp_runner::sweep::{RunFigures, report, variant_report};
+    let config = sweep_config(matcher, config)?;
+    let input = py.detach(|| sweep_input(&log, &relations, scans, lenient))?;
+    let figures = |v: &Bound<'_, PyAny>| -> PyResult<Result<RunFigures, String>> {
+        if let Ok(message) = v.extract::<String>() {
+            return Ok(Err(message));
+        }
+        let d = v.cast::<PyDict>()?;
+        let get = |k: &str| -> PyResult<Bound<'_, PyAny>> {
+            d.get_item(k)?
+                .ok_or_else(|| QicpError::new_err(format!("the figures have no `{k}`")))
+        };
+        Ok(Ok(RunFigures {
+            trans_mean: get("trans_mean")?.extract()?,
+            trans_max: get("trans_max")?.extract()?,
+            rot_mean_deg: get("rot_mean_deg")?.extract()?,
+            ms_per_scan_median: get("ms_per_scan_median")?.extract()?,
+            map_points: get("map_points")?.extract()?,
+            scans: get("scans")?.extract()?,
+            relations: get("relations")?.extract()?,
+            relations_missing: get("relations_missing")?.extract()?,
+            relations_over_0_5_m: get("relations_over_0_5_m")?.extract()?,
+        }))
+    };
+    let mut runs = results.iter();
+    let default = match runs.next() {
+        Some((name, v)) if name == "default" => match figures(v)? {
+            Ok(f) => f,
+            Err(e) => return Err(QicpError::new_err(format!("the default run failed: {e}"))),
+        },
+        _ => {
+            return Err(QicpError::new_err(
+                "the first result must be the default run",
+            ));
+        }
+    };
+    let variants = runs
+        .map(|(name, v)| Ok(variant_report(name, figures(v)?, &default)))
+        .collect::<PyResult<Vec<_>>>()?;
+    let report = report(&input, &config, default, variants);
+    serde_json::to_string_pretty(&report).map_err(refusal)
+}
