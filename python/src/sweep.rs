@@ -71,7 +71,7 @@ pub(crate) fn sweep_run<'py>(
             scans.and_then(std::num::NonZeroUsize::new),
             lenient,
         )?;
-        job.run(&input.records, &input.relations)
+        job.run(&input)
     });
     let figures = figures.map_err(|e| anyhow_refusal(&e))?;
     let value = serde_json::to_value(&figures).map_err(refusal)?;

@@ -137,8 +137,7 @@ impl<I: Iterator<Item = Result<Record>>> Iterator for Perturbed<I> {
                 }
                 InputVariant::MaxRange10 => capped_range(&record.scan, CAPPED_MAX_RANGE).map(Some),
                 InputVariant::OdometryNoise => {
-                    record.odometry =
-                        self.drifted(record.odometry, |d, rng| noisy_increment(d, rng));
+                    record.odometry = self.drifted(record.odometry, noisy_increment);
                     Ok(None)
                 }
                 InputVariant::OdometryBias => {
