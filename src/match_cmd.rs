@@ -247,6 +247,25 @@ pub fn listing(registry: &qicp_matchers::Registry) -> Result<String> {
             )?;
         }
     }
+    let laser = qicp_matchers::MatcherConfig::from_toml("[matcher]\nkind = \"wsm\"")?.to_table()?;
+    let laser = laser.get("laser").and_then(toml::Value::as_table);
+    writeln!(
+        out,
+        "laser noise ([matcher.laser], every algorithm; [swept] where the algorithm weighs by it):"
+    )?;
+    for p in qicp_matchers::LASER_PARAMETERS {
+        let value = laser
+            .and_then(|s| s.get(p.key))
+            .map_or_else(|| "?".into(), ToString::to_string);
+        let steering = if p.steering { " [swept]" } else { "" };
+        writeln!(
+            out,
+            "    {} = {value}  ({}){steering}: {}",
+            p.key,
+            p.range.describe(),
+            p.doc
+        )?;
+    }
     writeln!(
         out,
         "indexes ([matcher] index = NAME; prefix of composed names):"

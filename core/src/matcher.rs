@@ -25,10 +25,10 @@ pub trait ScanMatcher {
         prior: Option<Matrix3<f64>>,
     ) -> MatchResult;
 
-    /// The spacing (m) below which a new map point adds nothing this matcher can use: the
-    /// default density bound of a map it matches against (`matcher.relevance.map_resolution`).
-    /// Default 0.02.
-    fn map_resolution(&self) -> f64 {
+    /// The spacing (m) below which a new map point adds nothing this matcher can use, for a
+    /// laser of `noise`: the default density bound of a map it matches against
+    /// (`matcher.relevance.map_resolution`). Default 0.02.
+    fn map_resolution(&self, _noise: &crate::LaserNoise) -> f64 {
         0.02
     }
 

@@ -193,18 +193,36 @@ pub struct Reference<I> {
     scans: usize,
     /// Points per cell of the cell cap ([`Merge::max_cell_points`]).
     cells: HashMap<(i64, i64), u32>,
+    /// The noise of the laser whose scans enter, and of the scans matched against them.
+    noise: LaserNoise,
 }
 
 impl<I: SpatialIndex> Reference<I> {
-    /// An empty reference over the given (empty) index.
+    /// An empty reference over the given (empty) index, for a laser of the default noise
+    /// ([`LaserNoise::default`]).
     #[must_use]
     pub fn new(index: I) -> Self {
+        Self::with_noise(index, LaserNoise::default())
+    }
+
+    /// An empty reference over the given (empty) index, for a laser of `noise`: the one
+    /// place a pipeline's laser noise is held. Points entering take their covariances from
+    /// it, and matchers that weigh a scan by its noise read it here ([`Reference::noise`]).
+    #[must_use]
+    pub fn with_noise(index: I, noise: LaserNoise) -> Self {
         Self {
             index,
             info: Vec::new(),
             scans: 0,
             cells: HashMap::new(),
+            noise,
         }
+    }
+
+    /// The laser's noise.
+    #[must_use]
+    pub fn noise(&self) -> &LaserNoise {
+        &self.noise
     }
 
     /// The spatial index of the reference points.
@@ -258,7 +276,7 @@ impl<I: SpatialIndex> Reference<I> {
             .map(|n| (self.surface_foot(n.id, p) - p).norm_squared())
     }
 
-    /// Removes everything.
+    /// Removes every point (the laser's noise stays).
     pub fn clear(&mut self) {
         self.index.clear();
         self.info.clear();
@@ -266,7 +284,8 @@ impl<I: SpatialIndex> Reference<I> {
         self.cells.clear();
     }
 
-    /// Inserts the points of `scan`, seen from `pose` (the laser's pose in the reference frame).
+    /// Inserts the points of `scan`, seen from `pose` (the laser's pose in the reference
+    /// frame), with covariances from the reference's [`LaserNoise`].
     ///
     /// `merge` is `None` for a plain insertion (a scan as reference). With `Some(merge)`
     /// the scan is merged into a map: each new point's spacing is lowered to its distance from
@@ -279,10 +298,9 @@ impl<I: SpatialIndex> Reference<I> {
         &mut self,
         scan: &Scan,
         pose: &Pose2,
-        noise: &LaserNoise,
         merge: Option<Merge>,
     ) -> Result<usize, IndexError> {
-        let local = scan_point_info(scan, noise);
+        let local = scan_point_info(scan, &self.noise);
         let rot = pose.rotation();
         let global: Vec<Point2<f64>> = scan
             .points()

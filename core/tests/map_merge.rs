@@ -2,7 +2,7 @@
 //! checked against brute-force counts on seeded scans.
 
 use qicp_core::testdata::{SplitMix, SyntheticWorld};
-use qicp_core::{LaserNoise, Merge, Point2, Pose2, QuadTree, Reference, SpatialIndex};
+use qicp_core::{Merge, Point2, Pose2, QuadTree, Reference, SpatialIndex};
 use std::collections::HashMap;
 
 /// Points per cell of side `size`, counted one by one.
@@ -27,13 +27,8 @@ fn revisits(merge: Merge) -> Reference<QuadTree> {
             rng.range(-0.05, 0.05),
             0.01 * k as f64,
         );
-        map.insert_scan(
-            &world.scan(&pose, 0.005, k + 1),
-            &pose,
-            &LaserNoise::default(),
-            Some(merge),
-        )
-        .expect("finite points");
+        map.insert_scan(&world.scan(&pose, 0.005, k + 1), &pose, Some(merge))
+            .expect("finite points");
     }
     map
 }

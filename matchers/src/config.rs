@@ -7,6 +7,8 @@
 //! [matcher.icp]           # iteration (every algorithm)
 //! max_iterations = 40
 //! [matcher.wsm]           # the chosen algorithm's own section
+//! sigma_slide = 0.1
+//! [matcher.laser]         # the laser's noise (every algorithm; the reference holds it)
 //! sigma_range = 0.01
 //! [matcher.relevance]     # which scans enter the reference (paper Alg. 1 thresholds)
 //! tau_max = 0.25
@@ -17,12 +19,12 @@
 use crate::correlative::CorrelativeParams;
 use crate::icp::IcpParams;
 use crate::idc::Idc;
-use crate::params::to_table;
+use crate::params::{Param, Range, check_section, parse_section, to_table};
 use crate::pipeline::{MotionModel, Odometry, Pipeline, Relevance};
 use crate::registry::{Assembly, ErasedAlgorithm, IndexEntry, ReferenceKind, Registry};
 use crate::validation::ValidationParams;
 use crate::wsm::Wsm;
-use qicp_core::{KdTree, MutualNearest, QuadTree};
+use qicp_core::{KdTree, LaserNoise, MutualNearest, QuadTree};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use thiserror::Error;
@@ -132,10 +134,10 @@ impl std::str::FromStr for MatcherKind {
 /// are held here, so a config builds, prints and scales without the registry.
 #[derive(Clone)]
 pub struct MatcherConfig {
-    algorithm: Arc<dyn ErasedAlgorithm>,
+    pub(crate) algorithm: Arc<dyn ErasedAlgorithm>,
     /// Which scans the matcher is matched against.
     pub reference: ReferenceKind,
-    index: IndexEntry,
+    pub(crate) index: IndexEntry,
     /// Iteration parameters.
     pub icp: IcpParams,
     /// The algorithm's own section `[matcher.<algorithm>]`, effective (defaults filled in).
@@ -148,6 +150,9 @@ pub struct MatcherConfig {
     pub validation: ValidationParams,
     /// The correlative search that re-matches a suspect scan.
     pub correlative: CorrelativeParams,
+    /// The laser's noise (`[matcher.laser]`): one sensor parameter for every algorithm, held
+    /// by the reference ([`qicp_core::Reference::noise`]).
+    pub laser: LaserNoise,
 }
 
 impl std::fmt::Debug for MatcherConfig {
@@ -160,6 +165,7 @@ impl std::fmt::Debug for MatcherConfig {
             .field("motion", &self.motion)
             .field("validation", &self.validation)
             .field("correlative", &self.correlative)
+            .field("laser", &self.laser)
             .finish()
     }
 }
@@ -175,11 +181,78 @@ impl PartialEq for MatcherConfig {
             && self.motion == other.motion
             && self.validation == other.validation
             && self.correlative == other.correlative
+            && self.laser == other.laser
     }
 }
 
 /// The sections every algorithm shares, with their keys below `[matcher]`.
-const COMMON_SECTIONS: [&str; 5] = ["icp", "relevance", "motion", "validation", "correlative"];
+const COMMON_SECTIONS: [&str; 6] = [
+    "icp",
+    "relevance",
+    "motion",
+    "validation",
+    "correlative",
+    "laser",
+];
+
+/// The parameters of `[matcher.laser]`, declared once like an algorithm's.
+pub const LASER_PARAMETERS: &[Param] = &[
+    Param::steering(
+        "sigma_range",
+        Range::Positive,
+        "range noise σr along the beam (m)",
+    ),
+    Param::new(
+        "sigma_bearing",
+        Range::Positive,
+        "bearing noise σφ across the beam (rad)",
+    ),
+];
+
+/// Keys of `[matcher.laser]` that configs written before it gave in `[matcher.wsm]`: read
+/// there still, with the same meaning.
+const LEGACY_LASER_KEYS: [&str; 2] = ["sigma_range", "sigma_bearing"];
+
+/// The `[matcher.laser]` table, with the laser keys an old config gives in the WSM section
+/// (`own`, taken out of it) moved in; a key given in both places is refused.
+fn laser_section(
+    table: &mut toml::Table,
+    algorithm: &str,
+    own: &mut toml::Table,
+) -> Result<LaserNoise, ConfigError> {
+    let mut laser = match table.remove("laser") {
+        None => toml::Table::new(),
+        Some(toml::Value::Table(t)) => t,
+        Some(v) => {
+            return Err(ConfigError::invalid(
+                "matcher.laser",
+                format!("must be a table, not {v}"),
+            ));
+        }
+    };
+    if algorithm == "wsm" {
+        for key in LEGACY_LASER_KEYS {
+            if let Some(v) = own.remove(key) {
+                // Refused under the name the config gave.
+                let number = v.as_float().or(v.as_integer().map(|i| i as f64));
+                let param = LASER_PARAMETERS.iter().find(|p| p.key == key);
+                if let Some(why) = number.zip(param).and_then(|(x, p)| p.range.refuse(x)) {
+                    return Err(ConfigError::invalid(&format!("matcher.wsm.{key}"), why));
+                }
+                if laser.contains_key(key) {
+                    return Err(ConfigError::invalid(
+                        &format!("matcher.wsm.{key}"),
+                        format!("is the laser's noise: give it once, as matcher.laser.{key}"),
+                    ));
+                }
+                laser.insert(key.into(), v);
+            }
+        }
+    }
+    let noise: LaserNoise = parse_section("matcher.laser", &laser, LASER_PARAMETERS)?;
+    check_section("matcher.laser", &noise, LASER_PARAMETERS)?;
+    Ok(noise)
+}
 
 fn section<T: serde::de::DeserializeOwned + Default>(
     table: &mut toml::Table,
@@ -297,14 +370,14 @@ impl MatcherConfig {
     }
 
     /// Builds a config from the keys of `[matcher]` left after the axes; refuses leftovers.
-    fn assemble(
+    pub(crate) fn assemble(
         algorithm: Arc<dyn ErasedAlgorithm>,
         reference: ReferenceKind,
         index: IndexEntry,
         mut table: toml::Table,
         is_algorithm: &dyn Fn(&str) -> bool,
     ) -> Result<Self, ConfigError> {
-        let own = match table.remove(algorithm.name()) {
+        let mut own = match table.remove(algorithm.name()) {
             None => toml::Table::new(),
             Some(toml::Value::Table(t)) => t,
             Some(v) => {
@@ -333,9 +406,11 @@ impl MatcherConfig {
                 ));
             }
         };
+        let laser = laser_section(&mut table, algorithm.name(), &mut own)?;
         let mut c = Self {
             reference,
             icp,
+            laser,
             relevance: section(&mut table, "relevance")?,
             motion: section(&mut table, "motion")?,
             validation: section(&mut table, "validation")?,
@@ -401,7 +476,10 @@ impl MatcherConfig {
     /// Fills every section with defaults where absent: the effective config.
     pub fn fill_defaults(&mut self) {
         if self.relevance.map_resolution.is_none() {
-            let resolution = self.algorithm.map_resolution(&self.section).unwrap_or(0.02);
+            let resolution = self
+                .algorithm
+                .map_resolution(&self.section, &self.laser)
+                .unwrap_or(0.02);
             self.relevance.map_resolution = Some(resolution);
         }
     }
@@ -414,6 +492,7 @@ impl MatcherConfig {
         self.motion.validate()?;
         self.validation.validate()?;
         self.correlative.validate()?;
+        check_section("matcher.laser", &self.laser, LASER_PARAMETERS)?;
         Ok(())
     }
 
@@ -434,6 +513,7 @@ impl MatcherConfig {
         put("motion", to_table(&c.motion))?;
         put("validation", to_table(&c.validation))?;
         put("correlative", to_table(&c.correlative))?;
+        put("laser", to_table(&c.laser))?;
         m.insert("algorithm".into(), c.algorithm.name().into());
         m.insert("reference".into(), c.reference.name().into());
         m.insert("index".into(), c.index.name().into());
@@ -472,6 +552,7 @@ impl MatcherConfig {
                 motion: c.motion,
                 validation: c.validation,
                 correlative: c.correlative,
+                laser: c.laser,
                 index: &c.index,
             },
         )
@@ -486,117 +567,3 @@ pub type QWsm = Pipeline<Wsm<MutualNearest<QuadTree>>, QuadTree>;
 pub type KdIdc = Pipeline<Idc<MutualNearest<KdTree>>, KdTree>;
 /// KD-WSM: WSM against a kd-tree map.
 pub type KdWsm = Pipeline<Wsm<MutualNearest<KdTree>>, KdTree>;
-
-/// The numeric parameters of the shared sections that steer matching and map building: the
-/// ones a robustness sweep perturbs (`qicp sweep`), with each algorithm's own steering
-/// parameters ([`Param::steering`]). Keys are dotted paths below `[matcher]`.
-const STEERING_COMMON: &[&str] = &[
-    "icp.max_dist_start",
-    "icp.max_dist_end",
-    "relevance.tau_max",
-    "relevance.rho_max_deg",
-    "relevance.map_resolution",
-    "relevance.max_cell_points",
-    "relevance.window_scans",
-    "relevance.min_novelty",
-    "relevance.novelty_distance",
-    "motion.sigma_xy_per_m",
-    "motion.sigma_theta_per_m_deg",
-    "validation.inlier_distance",
-    "validation.max_share_drop",
-    "validation.max_residual_ratio",
-    "validation.max_odometry_chi2",
-    "correlative.window_xy",
-    "correlative.window_deg",
-];
-
-/// Steering parameters that act only through another one: each is left out of the sweep
-/// while the parameter it serves is 0 (off), as scaling it would change nothing.
-const SERVES: &[(&str, &str)] = &[
-    ("relevance.novelty_distance", "relevance.min_novelty"),
-    ("relevance.cell_size", "relevance.max_cell_points"),
-];
-
-impl MatcherConfig {
-    /// The numeric parameters that steer this matcher (correspondence distances, relevance
-    /// thresholds, the map's density bound, the noise and motion models, and the algorithm's
-    /// own steering parameters), as dotted keys such as `"matcher.icp.max_dist_start"`.
-    /// Parameters whose value is 0 are left out: scaling them changes nothing; so are those
-    /// that serve a parameter which is 0 (the novelty distance without the novelty gate).
-    #[must_use]
-    pub fn steering_parameters(&self) -> Vec<String> {
-        let Ok(value) = self.to_table() else {
-            return Vec::new();
-        };
-        let own = self
-            .algorithm
-            .parameters()
-            .iter()
-            .filter(|p| p.steering)
-            .map(|p| format!("{}.{}", self.algorithm.name(), p.key));
-        STEERING_COMMON
-            .iter()
-            .map(|k| k.to_string())
-            .chain(own)
-            .map(|k| format!("matcher.{k}"))
-            .filter(|k| lookup(&value, k).is_some_and(|v| v != 0.0))
-            .filter(|k| {
-                SERVES.iter().all(|(key, served)| {
-                    k.strip_prefix("matcher.") != Some(key)
-                        || lookup(&value, &format!("matcher.{served}")).is_some_and(|v| v != 0.0)
-                })
-            })
-            .collect()
-    }
-
-    /// The value of a numeric parameter given as a dotted key (`"matcher.wsm.sigma_slide"`),
-    /// defaults filled in; `None` if the key names no number.
-    #[must_use]
-    pub fn parameter(&self, key: &str) -> Option<f64> {
-        lookup(&self.to_table().ok()?, key)
-    }
-
-    /// This config with the numeric parameter `key` (a dotted key, as
-    /// [`steering_parameters`](Self::steering_parameters) gives) multiplied by `factor`,
-    /// validated. Integers are rounded to the nearest whole number.
-    pub fn scaled(&self, key: &str, factor: f64) -> Result<Self, ConfigError> {
-        let unknown = || ConfigError::invalid(key, "is not a numeric matcher parameter");
-        let mut table = self.to_table()?;
-        let mut parts = key.strip_prefix("matcher.").ok_or_else(unknown)?.split('.');
-        let first = parts.next().ok_or_else(unknown)?;
-        let mut at = table.get_mut(first).ok_or_else(unknown)?;
-        for part in parts {
-            at = at.get_mut(part).ok_or_else(unknown)?;
-        }
-        *at = match *at {
-            toml::Value::Float(v) => toml::Value::Float(v * factor),
-            toml::Value::Integer(v) => toml::Value::Integer((v as f64 * factor).round() as i64),
-            _ => return Err(unknown()),
-        };
-        for axis in ["algorithm", "reference", "index"] {
-            table.remove(axis);
-        }
-        // Leftover keys cannot appear: the table is this config's own.
-        Self::assemble(
-            self.algorithm.clone(),
-            self.reference,
-            self.index.clone(),
-            table,
-            &|_| false,
-        )
-    }
-}
-
-/// The number at a dotted key (`"matcher.wsm.sigma_slide"`) of an effective config's table.
-fn lookup(table: &toml::Table, key: &str) -> Option<f64> {
-    let mut parts = key.strip_prefix("matcher.")?.split('.');
-    let mut at = table.get(parts.next()?)?;
-    for part in parts {
-        at = at.get(part)?;
-    }
-    match at {
-        toml::Value::Float(v) => Some(*v),
-        toml::Value::Integer(v) => Some(*v as f64),
-        _ => None,
-    }
-}

@@ -264,15 +264,15 @@ impl CorrelativeSearch {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use qicp_core::QuadTree;
     use qicp_core::testdata::SyntheticWorld;
-    use qicp_core::{LaserNoise, QuadTree};
 
     #[test]
     fn finds_a_pose_twenty_degrees_and_forty_centimetres_off() {
         let scan = SyntheticWorld::room().scan(&Pose2::IDENTITY, 0.005, 1);
         let mut reference = Reference::new(QuadTree::default());
         reference
-            .insert_scan(&scan, &Pose2::IDENTITY, &LaserNoise::default(), None)
+            .insert_scan(&scan, &Pose2::IDENTITY, None)
             .unwrap();
         let mut search = CorrelativeSearch::new(CorrelativeParams::default());
         let guess = Pose2::new(0.3, -0.25, 20f64.to_radians());

@@ -41,10 +41,13 @@ pub mod lsq;
 pub mod params;
 pub mod pipeline;
 pub mod registry;
+mod steering;
 pub mod validation;
 pub mod wsm;
 
-pub use config::{ConfigError, KdIdc, KdWsm, MatcherConfig, MatcherKind, QIdc, QWsm};
+pub use config::{
+    ConfigError, KdIdc, KdWsm, LASER_PARAMETERS, MatcherConfig, MatcherKind, QIdc, QWsm,
+};
 pub use correlative::{Candidate, CorrelativeParams, CorrelativeSearch};
 pub use icp::IcpParams;
 pub use idc::{Idc, IdcAlgorithm, IdcParams};

@@ -28,7 +28,7 @@ pub struct Relevance {
     /// map's density, so that memory and per-scan time grow with the area explored, not with
     /// time. 0 inserts every point, as Alg. 1 reads (693k points on the Intel log).
     /// Default (`None`): the matcher's own [`ScanMatcher::map_resolution`], in typed and
-    /// TOML-built pipelines alike: for WSM the laser's range noise `matcher.wsm.sigma_range`
+    /// TOML-built pipelines alike: for WSM the laser's range noise `matcher.laser.sigma_range`
     /// (0.01), below which a new point adds no geometry; 0.02 for IDC, whose range rule's
     /// radius queries grow with the map's density (40 ms/scan on a corridor map without it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -273,7 +273,6 @@ pub struct Pipeline<M, I> {
     matcher: M,
     reference: Reference<I>,
     policy: Policy,
-    noise: LaserNoise,
     motion: MotionModel,
     /// Pose of the reference frame in the world: the previous scan's laser pose
     /// (incremental), the identity (boosted).
@@ -294,7 +293,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// A pipeline named `kind` (for reports), with the defaults of the TOML registry: the
     /// odometry prior of [`MotionModel::default`], the checks of
     /// [`ValidationParams::default`] and [`CorrelativeParams::default`], and the matcher's own
-    /// map resolution where `policy` leaves it unset. `Pipeline::new(..)` with default
+    /// map resolution where `policy` leaves it unset. `noise` is the laser's
+    /// (`[matcher.laser]` in TOML), held by the reference for every matcher. `Pipeline::new(..)` with default
     /// parameters and `Registry::config(name)?.build()` give the same poses.
     pub fn new(
         kind: impl Into<String>,
@@ -306,9 +306,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         Self {
             kind: kind.into(),
             matcher,
-            reference: Reference::new(index),
+            reference: Reference::with_noise(index, noise),
             policy,
-            noise,
             motion: MotionModel::default(),
             reference_frame: Pose2::IDENTITY,
             last: None,
@@ -424,7 +423,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                 self.reference.clear();
                 self.reference_frame = *laser;
                 self.reference
-                    .insert_scan(&record.scan, &Pose2::IDENTITY, &self.noise, None)
+                    .insert_scan(&record.scan, &Pose2::IDENTITY, None)
                     .is_ok()
             }
             Policy::Boosted(_) => {
@@ -444,10 +443,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     return false;
                 }
                 // paper Alg. 1: insert all scan points of s_global into Q_t
-                let merge = Some(relevance.merge(self.matcher.map_resolution()));
+                let merge =
+                    Some(relevance.merge(self.matcher.map_resolution(self.reference.noise())));
                 let inserted = self
                     .reference
-                    .insert_scan(&record.scan, laser, &self.noise, merge)
+                    .insert_scan(&record.scan, laser, merge)
                     .is_ok();
                 if inserted && relevance.window_scans > 0 {
                     self.window.push_back((record.scan.clone(), *laser));
@@ -458,7 +458,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                         self.reference.clear();
                         for (scan, pose) in &self.window {
                             // These points were finite when first inserted.
-                            let _ = self.reference.insert_scan(scan, pose, &self.noise, merge);
+                            let _ = self.reference.insert_scan(scan, pose, merge);
                         }
                     }
                 }

@@ -67,15 +67,16 @@ pub trait Algorithm: 'static {
         Ok(())
     }
 
-    /// The laser noise the reference's point covariances use. Default: [`LaserNoise::default`].
-    fn noise(_params: &Self::Params) -> LaserNoise {
-        LaserNoise::default()
-    }
+    /// True when the matcher weighs pairs by the laser's noise (`[matcher.laser]`, which the
+    /// reference holds: [`Reference::noise`](qicp_core::Reference::noise)), so that a
+    /// robustness sweep perturbs it. Default false.
+    const WEIGHS_BY_LASER_NOISE: bool = false;
 
-    /// The default of `matcher.relevance.map_resolution` for this algorithm (m): by default
-    /// its matcher's [`ScanMatcher::map_resolution`], so typed and registry pipelines agree.
-    fn map_resolution(params: &Self::Params) -> f64 {
-        Self::matcher::<qicp_core::ClosestPoint>(IcpParams::default(), params).map_resolution()
+    /// The default of `matcher.relevance.map_resolution` for this algorithm and a laser of
+    /// `noise` (m): by default its matcher's [`ScanMatcher::map_resolution`], so typed and
+    /// registry pipelines agree.
+    fn map_resolution(params: &Self::Params, noise: &LaserNoise) -> f64 {
+        Self::matcher::<qicp_core::ClosestPoint>(IcpParams::default(), params).map_resolution(noise)
     }
 }
 
@@ -223,6 +224,7 @@ pub(crate) struct Assembly<'a> {
     pub motion: MotionModel,
     pub validation: ValidationParams,
     pub correlative: CorrelativeParams,
+    pub laser: LaserNoise,
     pub index: &'a IndexEntry,
 }
 
@@ -234,7 +236,9 @@ pub(crate) trait ErasedAlgorithm: Send + Sync {
     fn icp_defaults(&self) -> IcpParams;
     /// Checks a user's section and returns the effective one (defaults filled in).
     fn effective(&self, section: &toml::Table) -> Result<toml::Table, ConfigError>;
-    fn map_resolution(&self, section: &toml::Table) -> Result<f64, ConfigError>;
+    fn map_resolution(&self, section: &toml::Table, noise: &LaserNoise)
+    -> Result<f64, ConfigError>;
+    fn weighs_by_laser_noise(&self) -> bool;
     fn build(
         &self,
         section: &toml::Table,
@@ -282,8 +286,15 @@ impl<A: Algorithm> ErasedAlgorithm for Registered<A> {
     fn effective(&self, section: &toml::Table) -> Result<toml::Table, ConfigError> {
         to_table(&self.params(section)?)
     }
-    fn map_resolution(&self, section: &toml::Table) -> Result<f64, ConfigError> {
-        Ok(A::map_resolution(&self.params(section)?))
+    fn map_resolution(
+        &self,
+        section: &toml::Table,
+        noise: &LaserNoise,
+    ) -> Result<f64, ConfigError> {
+        Ok(A::map_resolution(&self.params(section)?, noise))
+    }
+    fn weighs_by_laser_noise(&self) -> bool {
+        A::WEIGHS_BY_LASER_NOISE
     }
     fn build(
         &self,
@@ -291,7 +302,7 @@ impl<A: Algorithm> ErasedAlgorithm for Registered<A> {
         with: Assembly<'_>,
     ) -> Result<Box<dyn Odometry>, ConfigError> {
         let params = self.params(section)?;
-        let noise = A::noise(&params);
+        let noise = with.laser;
         let icp = with.icp;
         Ok(match &with.index.make {
             IndexMaker::QuadTree => assemble(

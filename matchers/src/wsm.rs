@@ -16,10 +16,6 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WsmParams {
-    /// Range noise σr, along the beam (m). Default 0.01.
-    pub sigma_range: f64,
-    /// Bearing noise σφ, across the beam (rad). Default 0.001.
-    pub sigma_bearing: f64,
     /// Scale of the sampling part of the correspondence error, uniform over the sample spacing
     /// s of the reference surface: variance (s²/12)·scale along the surface. Default 1.
     pub correspondence_scale: f64,
@@ -36,8 +32,6 @@ pub struct WsmParams {
 impl Default for WsmParams {
     fn default() -> Self {
         Self {
-            sigma_range: 0.01,
-            sigma_bearing: 0.001,
             correspondence_scale: 1.0,
             sigma_slide: 0.1,
             normal_fraction: 0.01,
@@ -53,16 +47,6 @@ impl Algorithm for WsmAlgorithm {
     const NAME: &'static str = "wsm";
     const SUMMARY: &'static str = "Weighted Scan Matching (Pfister et al. 2002)";
     const PARAMETERS: &'static [Param] = &[
-        Param::steering(
-            "sigma_range",
-            Range::Positive,
-            "range noise σr along the beam (m)",
-        ),
-        Param::new(
-            "sigma_bearing",
-            Range::Positive,
-            "bearing noise σφ across the beam (rad)",
-        ),
         Param::new(
             "correspondence_scale",
             Range::Positive,
@@ -86,24 +70,14 @@ impl Algorithm for WsmAlgorithm {
         Wsm::new(icp, *params)
     }
 
-    fn noise(params: &WsmParams) -> LaserNoise {
-        params.noise()
-    }
+    /// WSM weighs every pair by the laser's noise, so `[matcher.laser]` steers it.
+    const WEIGHS_BY_LASER_NOISE: bool = true;
 }
 
 impl WsmParams {
     /// Checks every value against its declared range; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
         check_section("matcher.wsm", self, WsmAlgorithm::PARAMETERS)
-    }
-
-    /// The laser noise model these parameters describe.
-    #[must_use]
-    pub fn noise(&self) -> LaserNoise {
-        LaserNoise {
-            sigma_range: self.sigma_range,
-            sigma_bearing: self.sigma_bearing,
-        }
     }
 
     /// Covariance of the correspondence error at a reference point (Pfister et al. Sec. IV):
@@ -215,8 +189,8 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
     }
 
     /// The laser's range noise, below which a new point adds no geometry.
-    fn map_resolution(&self) -> f64 {
-        self.params.sigma_range
+    fn map_resolution(&self, noise: &LaserNoise) -> f64 {
+        noise.sigma_range
     }
 
     fn match_with_prior<I: SpatialIndex>(
@@ -230,7 +204,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
             return MatchResult::fallback(guess, why);
         }
         let local = scan.points();
-        let scan_info = scan_point_info(scan, &self.params.noise());
+        let scan_info = scan_point_info(scan, reference.noise());
         self.metric.begin_scan(local);
         let mut pose = guess;
         let mut converged = false;

@@ -28,8 +28,55 @@ fn kind_and_parameters_from_toml() {
     .unwrap();
     assert_eq!(c.kind(), MatcherKind::QWsm.name());
     assert_eq!(c.icp.max_iterations, 7);
-    assert_eq!(c.params::<WsmParams>().unwrap().sigma_range, 0.02);
+    assert_eq!(c.laser.sigma_range, 0.02);
     assert_eq!(c.relevance.tau_max, 0.5);
+}
+
+/// Laser noise is one sensor parameter: `[matcher.laser]` for every algorithm, read from the
+/// WSM section of configs written before it with the same meaning, and given once.
+#[test]
+fn laser_noise_is_one_sensor_parameter_and_old_wsm_configs_keep_their_meaning() {
+    let new = MatcherConfig::from_toml(
+        "[matcher]\nkind = \"q-wsm\"\n[matcher.laser]\nsigma_range = 0.02\nsigma_bearing = 0.002\n",
+    )
+    .unwrap();
+    let old = MatcherConfig::from_toml(
+        "[matcher]\nkind = \"q-wsm\"\n[matcher.wsm]\nsigma_range = 0.02\nsigma_bearing = 0.002\n",
+    )
+    .unwrap();
+    assert_eq!(new, old);
+    assert_eq!(new.laser.sigma_bearing, 0.002);
+    // WSM's map resolution defaults to the laser's range noise.
+    assert_eq!(new.relevance.map_resolution, Some(0.02));
+    let toml = new.to_toml();
+    assert!(toml.contains("[matcher.laser]"), "{toml}");
+    assert_eq!(MatcherConfig::from_toml(&toml).unwrap(), new);
+    // Every algorithm takes it; only the ones weighing by it have it swept.
+    let idc = MatcherConfig::from_toml(
+        "[matcher]\nkind = \"q-idc\"\n[matcher.laser]\nsigma_range = 0.03\n",
+    )
+    .unwrap();
+    assert_eq!(idc.laser.sigma_range, 0.03);
+    assert!(
+        !idc.steering_parameters()
+            .iter()
+            .any(|k| k.contains("laser"))
+    );
+    assert!(
+        new.steering_parameters()
+            .contains(&"matcher.laser.sigma_range".to_string())
+    );
+    let scaled = new.scaled("matcher.laser.sigma_range", 1.4).unwrap();
+    assert!((scaled.laser.sigma_range - 0.028).abs() < 1e-12);
+    let both = MatcherConfig::from_toml(
+        "[matcher]\nkind = \"wsm\"\n[matcher.wsm]\nsigma_range = 0.02\n[matcher.laser]\nsigma_range = 0.02\n",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        both.contains("matcher.wsm.sigma_range") && both.contains("once"),
+        "{both}"
+    );
 }
 
 #[test]
@@ -69,6 +116,10 @@ fn out_of_range_values_name_the_key() {
         (
             "[matcher.wsm]\nsigma_range = 0.0",
             "matcher.wsm.sigma_range",
+        ),
+        (
+            "[matcher.laser]\nsigma_bearing = -1.0",
+            "matcher.laser.sigma_bearing",
         ),
         (
             "[matcher.wsm]\nsigma_slide = nan",

@@ -4,7 +4,7 @@
 
 use qicp_core::testdata::SyntheticWorld;
 use qicp_core::{
-    BruteForce, ClosestPoint, KdTree, LaserNoise, Merge, MutualNearest, Pose2, QuadTree, Reference,
+    BruteForce, ClosestPoint, KdTree, Merge, MutualNearest, Pose2, QuadTree, Reference,
     ScanMatcher, SpatialIndex, normalize_angle,
 };
 use qicp_matchers::{IcpParams, Idc, IdcParams, Wsm, WsmParams};
@@ -60,7 +60,7 @@ fn recovers_known_motion<M: ScanMatcher, I: SpatialIndex + Default>(mut matcher:
         let after = case.world.scan(&(case.from * case.motion), 0.005, 2);
         let mut reference = Reference::new(I::default());
         reference
-            .insert_scan(&before, &Pose2::IDENTITY, &LaserNoise::default(), None)
+            .insert_scan(&before, &Pose2::IDENTITY, None)
             .unwrap();
         for error in guess_errors() {
             let guess = case.motion * error;
@@ -90,7 +90,6 @@ fn recovers_pose_in_map<M: ScanMatcher, I: SpatialIndex + Default>(mut matcher: 
             map.insert_scan(
                 &case.world.scan(&pose, 0.005, 10 + k),
                 &pose,
-                &LaserNoise::default(),
                 Some(Merge::spacing(0.02)),
             )
             .unwrap();

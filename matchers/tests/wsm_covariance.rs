@@ -2,7 +2,7 @@
 //! axis, not across it.
 
 use qicp_core::testdata::SyntheticWorld;
-use qicp_core::{LaserNoise, MutualNearest, Pose2, QuadTree, Reference, ScanMatcher};
+use qicp_core::{MutualNearest, Pose2, QuadTree, Reference, ScanMatcher};
 use qicp_matchers::{IcpParams, Wsm, WsmParams};
 
 #[test]
@@ -14,12 +14,7 @@ fn covariance_is_larger_along_a_corridor_than_across_it() {
         let motion = Pose2::new(0.3, 0.0, 0.02);
         let mut reference = Reference::new(QuadTree::default());
         reference
-            .insert_scan(
-                &world.scan(&from, 0.005, 1),
-                &Pose2::IDENTITY,
-                &LaserNoise::default(),
-                None,
-            )
+            .insert_scan(&world.scan(&from, 0.005, 1), &Pose2::IDENTITY, None)
             .unwrap();
         let scan = world.scan(&(from * motion), 0.005, 2);
         let mut wsm =

@@ -1,9 +1,7 @@
 //! A WSM estimate whose pairs fall out of the shrinking gate is not reported as a match: with
 //! fewer final pairs than `min_correspondences` the result is a fallback to the guess.
 
-use qicp_core::{
-    BeamGeometry, Fallback, LaserNoise, Pose2, QuadTree, Reference, Scan, ScanMatcher,
-};
+use qicp_core::{BeamGeometry, Fallback, Pose2, QuadTree, Reference, Scan, ScanMatcher};
 use qicp_matchers::{IcpParams, Wsm, WsmParams};
 
 /// Ranges of beams spread over ±30° that hit a wall at x = 5, minus `short` on every beam
@@ -22,13 +20,8 @@ fn wall_scan(beams: usize, clutter: &[usize], short: f64) -> Scan {
 
 fn reference() -> Reference<QuadTree> {
     let mut r = Reference::new(QuadTree::default());
-    r.insert_scan(
-        &wall_scan(121, &[], 0.0),
-        &Pose2::IDENTITY,
-        &LaserNoise::default(),
-        None,
-    )
-    .expect("insert");
+    r.insert_scan(&wall_scan(121, &[], 0.0), &Pose2::IDENTITY, None)
+        .expect("insert");
     r
 }
 

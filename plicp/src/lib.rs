@@ -246,7 +246,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         self.metric.begin_scan(local);
         self.normals.clear();
         if self.params.max_normal_angle_deg > 0.0 {
-            let info = qicp_core::scan_point_info(scan, &qicp_core::LaserNoise::default());
+            let info = qicp_core::scan_point_info(scan, reference.noise());
             self.normals.extend(info.iter().map(|i| i.normal));
         }
         let prior = prior.as_ref().map(|l| (l, &guess));

@@ -1,0 +1,124 @@
+//! The parameters a robustness sweep perturbs (`qicp sweep`): which numbers of a
+//! [`MatcherConfig`] steer matching and map building, read and scaled by dotted key.
+
+use crate::config::{ConfigError, LASER_PARAMETERS, MatcherConfig};
+
+/// The numeric parameters of the shared sections that steer matching and map building: the
+/// ones a robustness sweep perturbs (`qicp sweep`), with each algorithm's own steering
+/// parameters ([`Param::steering`](crate::Param::steering)) and, for an algorithm that weighs by
+/// it, the laser's range noise. Keys are dotted paths below `[matcher]`.
+const STEERING_COMMON: &[&str] = &[
+    "icp.max_dist_start",
+    "icp.max_dist_end",
+    "relevance.tau_max",
+    "relevance.rho_max_deg",
+    "relevance.map_resolution",
+    "relevance.max_cell_points",
+    "relevance.window_scans",
+    "relevance.min_novelty",
+    "relevance.novelty_distance",
+    "motion.sigma_xy_per_m",
+    "motion.sigma_theta_per_m_deg",
+    "validation.inlier_distance",
+    "validation.max_share_drop",
+    "validation.max_residual_ratio",
+    "validation.max_odometry_chi2",
+    "correlative.window_xy",
+    "correlative.window_deg",
+];
+
+/// Steering parameters that act only through another one: each is left out of the sweep
+/// while the parameter it serves is 0 (off), as scaling it would change nothing.
+const SERVES: &[(&str, &str)] = &[
+    ("relevance.novelty_distance", "relevance.min_novelty"),
+    ("relevance.cell_size", "relevance.max_cell_points"),
+];
+
+impl MatcherConfig {
+    /// The numeric parameters that steer this matcher (correspondence distances, relevance
+    /// thresholds, the map's density bound, the noise and motion models, and the algorithm's
+    /// own steering parameters), as dotted keys such as `"matcher.icp.max_dist_start"`.
+    /// Parameters whose value is 0 are left out: scaling them changes nothing; so are those
+    /// that serve a parameter which is 0 (the novelty distance without the novelty gate).
+    #[must_use]
+    pub fn steering_parameters(&self) -> Vec<String> {
+        let Ok(value) = self.to_table() else {
+            return Vec::new();
+        };
+        let own = self
+            .algorithm
+            .parameters()
+            .iter()
+            .filter(|p| p.steering)
+            .map(|p| format!("{}.{}", self.algorithm.name(), p.key));
+        let laser = LASER_PARAMETERS
+            .iter()
+            .filter(|p| p.steering && self.algorithm.weighs_by_laser_noise())
+            .map(|p| format!("laser.{}", p.key));
+        STEERING_COMMON
+            .iter()
+            .map(|k| k.to_string())
+            .chain(own)
+            .chain(laser)
+            .map(|k| format!("matcher.{k}"))
+            .filter(|k| lookup(&value, k).is_some_and(|v| v != 0.0))
+            .filter(|k| {
+                SERVES.iter().all(|(key, served)| {
+                    k.strip_prefix("matcher.") != Some(key)
+                        || lookup(&value, &format!("matcher.{served}")).is_some_and(|v| v != 0.0)
+                })
+            })
+            .collect()
+    }
+
+    /// The value of a numeric parameter given as a dotted key (`"matcher.wsm.sigma_slide"`),
+    /// defaults filled in; `None` if the key names no number.
+    #[must_use]
+    pub fn parameter(&self, key: &str) -> Option<f64> {
+        lookup(&self.to_table().ok()?, key)
+    }
+
+    /// This config with the numeric parameter `key` (a dotted key, as
+    /// [`steering_parameters`](Self::steering_parameters) gives) multiplied by `factor`,
+    /// validated. Integers are rounded to the nearest whole number.
+    pub fn scaled(&self, key: &str, factor: f64) -> Result<Self, ConfigError> {
+        let unknown = || ConfigError::invalid(key, "is not a numeric matcher parameter");
+        let mut table = self.to_table()?;
+        let mut parts = key.strip_prefix("matcher.").ok_or_else(unknown)?.split('.');
+        let first = parts.next().ok_or_else(unknown)?;
+        let mut at = table.get_mut(first).ok_or_else(unknown)?;
+        for part in parts {
+            at = at.get_mut(part).ok_or_else(unknown)?;
+        }
+        *at = match *at {
+            toml::Value::Float(v) => toml::Value::Float(v * factor),
+            toml::Value::Integer(v) => toml::Value::Integer((v as f64 * factor).round() as i64),
+            _ => return Err(unknown()),
+        };
+        for axis in ["algorithm", "reference", "index"] {
+            table.remove(axis);
+        }
+        // Leftover keys cannot appear: the table is this config's own.
+        Self::assemble(
+            self.algorithm.clone(),
+            self.reference,
+            self.index.clone(),
+            table,
+            &|_| false,
+        )
+    }
+}
+
+/// The number at a dotted key (`"matcher.wsm.sigma_slide"`) of an effective config's table.
+fn lookup(table: &toml::Table, key: &str) -> Option<f64> {
+    let mut parts = key.strip_prefix("matcher.")?.split('.');
+    let mut at = table.get(parts.next()?)?;
+    for part in parts {
+        at = at.get(part)?;
+    }
+    match at {
+        toml::Value::Float(v) => Some(*v),
+        toml::Value::Integer(v) => Some(*v as f64),
+        _ => None,
+    }
+}
