@@ -1,0 +1,246 @@
+//! The sweep's variants, perturbations and parallel runs, on small seeded cases.
+
+use super::*;
+
+fn scan(ranges: Vec<f64>) -> Scan {
+    let geometry = BeamGeometry {
+        angle_min: -1.0,
+        angle_increment: 0.1,
+        max_range: 20.0,
+        min_range: 0.1,
+    };
+    Scan::new(3.0, geometry, ranges).expect("valid scan")
+}
+
+fn records(odometry: &[Pose2]) -> Vec<Record> {
+    odometry
+        .iter()
+        .enumerate()
+        .map(|(i, &odometry)| Record {
+            scan: Scan::new(i as f64, BeamGeometry::centered(5, 1.0, 20.0), vec![1.0; 5])
+                .expect("valid scan"),
+            odometry,
+            truth: None,
+            laser_offset: Pose2::IDENTITY,
+        })
+        .collect()
+}
+
+/// A straight drive along x from the origin in `steps` equal steps.
+fn straight(length: f64, steps: usize) -> Vec<Pose2> {
+    (0..=steps)
+        .map(|i| Pose2::new(length * i as f64 / steps as f64, 0.0, 0.0))
+        .collect()
+}
+
+/// A seeded random drive: wandering odometry, ranges with no-returns and invalid readings.
+fn random_records(n: usize, seed: u64) -> Vec<Record> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut odometry = Pose2::new(1.0, -2.0, 0.3);
+    (0..n)
+        .map(|i| {
+            let step = Pose2::new(
+                rng.random_range(0.0..0.3),
+                rng.random_range(-0.05..0.05),
+                rng.random_range(-0.2..0.2),
+            );
+            odometry = odometry.compose(&step);
+            let ranges = (0..37)
+                .map(|_| match rng.random_range(0..10) {
+                    0 => -1.0,
+                    1 => 30.0,
+                    _ => rng.random_range(0.2..18.0),
+                })
+                .collect();
+            Record {
+                scan: Scan::new(
+                    0.1 * i as f64,
+                    BeamGeometry::centered(37, 3.0, 20.0),
+                    ranges,
+                )
+                .expect("valid scan"),
+                odometry,
+                truth: None,
+                laser_offset: Pose2::IDENTITY,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn a_streamed_input_variant_gives_the_records_of_the_whole_log_form() {
+    for seed in 0..3 {
+        let records = random_records(41, seed);
+        for variant in InputVariant::ALL {
+            let whole = variant.apply(&records).expect("applies");
+            let streamed: Vec<Record> = variant
+                .stream(records.iter().cloned().map(Ok))
+                .collect::<Result<_>>()
+                .expect("streams");
+            assert_eq!(streamed, whole, "{} (seed {seed})", variant.name());
+            assert_ne!(streamed, records, "{} changed nothing", variant.name());
+        }
+    }
+}
+
+#[test]
+fn a_streamed_input_variant_passes_errors_on_and_keeps_going() {
+    let records = random_records(6, 1);
+    let input = records.iter().enumerate().map(|(i, r)| {
+        if i == 2 {
+            Err(anyhow::anyhow!("bad line"))
+        } else {
+            Ok(r.clone())
+        }
+    });
+    let out: Vec<Result<Record>> = InputVariant::EveryOtherRecord.stream(input).collect();
+    // Records 0, 1, 3, 4, 5 count; 0, 3 and 5 are kept, and the error is not lost.
+    assert_eq!(out.len(), 4);
+    assert!(out[1].as_ref().is_err_and(|e| e.to_string() == "bad line"));
+    let kept: Vec<f64> = out.iter().flatten().map(Record::timestamp).collect();
+    assert_eq!(kept, [0.0, 0.1 * 3.0, 0.1 * 5.0]);
+}
+
+#[test]
+fn every_other_beam_halves_the_beams_and_keeps_their_bearings() {
+    let s = scan((0..11).map(|i| 1.0 + f64::from(i)).collect());
+    let half = every_other_beam(&s).expect("valid");
+    assert_eq!(half.beams(), 6);
+    for (k, i) in (0..11).step_by(2).enumerate() {
+        assert!((half.geometry.angle(k) - s.geometry.angle(i)).abs() < 1e-12);
+        assert_eq!(half.ranges()[k], s.ranges()[i]);
+    }
+}
+
+#[test]
+fn every_other_record_keeps_the_even_ones() {
+    let r = records(&straight(1.0, 4));
+    let kept: Vec<f64> = every_other_record(&r)
+        .iter()
+        .map(Record::timestamp)
+        .collect();
+    assert_eq!(kept, [0.0, 2.0, 4.0]);
+}
+
+#[test]
+fn odometry_bias_on_a_straight_metre() {
+    // One increment of 1 m: exactly 1.05 m and 1°.
+    let one = biased_increment(Pose2::new(1.0, 0.0, 0.0));
+    assert!((one.x - 1.05).abs() < 1e-12 && one.y.abs() < 1e-12);
+    assert!((one.theta.to_degrees() - 1.0).abs() < 1e-12);
+    // A hundred 1 cm steps: 1.05 m travelled on a gentle arc, 1° turned in all.
+    let poses = perturb_increments(&straight(1.0, 100), biased_increment);
+    let end = poses.last().copied().unwrap_or_default();
+    assert!((end.x.hypot(end.y) - 1.05).abs() < 1e-4, "{end:?}");
+    assert!((end.theta.to_degrees() - 1.0).abs() < 1e-9, "{end:?}");
+    assert_eq!(poses.first().copied(), Some(Pose2::IDENTITY));
+}
+
+#[test]
+fn perturbed_odometry_starts_at_the_first_pose_and_keeps_it_unperturbed() {
+    let start = Pose2::new(3.0, -2.0, 0.5);
+    let path: Vec<Pose2> = straight(2.0, 10).iter().map(|p| start.compose(p)).collect();
+    let same = perturb_increments(&path, |d| d);
+    for (a, b) in path.iter().zip(&same) {
+        assert!(a.distance(b) < 1e-9 && (a.theta - b.theta).abs() < 1e-9);
+    }
+    let biased = perturb_increments(&path, biased_increment);
+    assert_eq!(biased.first(), path.first());
+    let end = biased.last().copied().unwrap_or_default();
+    assert!((start.distance(&end) - 2.1).abs() < 1e-3, "{end:?}");
+}
+
+#[test]
+fn odometry_noise_is_deterministic_for_a_seed_and_drifts() {
+    let r = records(&straight(5.0, 50));
+    let a = InputVariant::OdometryNoise.apply(&r).expect("applies");
+    let b = InputVariant::OdometryNoise.apply(&r).expect("applies");
+    assert_eq!(a, b);
+    let mut rng = ChaCha8Rng::seed_from_u64(SEED + 1);
+    let poses: Vec<Pose2> = r.iter().map(|r| r.odometry).collect();
+    let c = perturb_increments(&poses, |d| noisy_increment(d, &mut rng));
+    assert_ne!(a.last().map(|r| r.odometry), c.last().copied());
+    let drift = a
+        .last()
+        .zip(r.last())
+        .map(|(a, r)| a.odometry.distance(&r.odometry))
+        .unwrap_or_default();
+    assert!(drift > 1e-4 && drift < 1.5, "drift {drift}");
+    // A robot standing still gets no noise.
+    let still = perturb_increments(&[Pose2::IDENTITY; 5], |d| noisy_increment(d, &mut rng));
+    assert!(still.iter().all(|p| *p == Pose2::IDENTITY));
+}
+
+#[test]
+fn range_noise_leaves_invalid_readings_alone() {
+    let s = scan(vec![1.0, f64::NAN, 25.0, 0.05, 2.0, -1.0, 3.0]);
+    let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+    let noisy = noisy_ranges(&s, 0.01, &mut rng).expect("valid");
+    for (i, (&before, &after)) in s.ranges().iter().zip(noisy.ranges()).enumerate() {
+        if s.status()[i] == BeamStatus::Valid {
+            assert_ne!(before, after);
+            assert!((before - after).abs() < 0.06);
+        } else {
+            assert!(before.to_bits() == after.to_bits(), "beam {i} changed");
+        }
+    }
+}
+
+#[test]
+fn capped_range_turns_far_returns_into_no_returns() {
+    let s = scan(vec![1.0, 9.9, 10.0, 15.0]);
+    let capped = capped_range(&s, 10.0).expect("valid");
+    assert_eq!(capped.valid_count(), 2);
+    assert_eq!(capped.status()[3], BeamStatus::MaxRange);
+    assert_eq!(capped.ranges(), s.ranges());
+    // A laser that sees less than 10 m keeps its own range.
+    let near = capped_range(&capped_range(&s, 5.0).expect("valid"), 10.0).expect("valid");
+    assert!((near.geometry.max_range - 5.0).abs() < 1e-12);
+}
+
+#[test]
+fn variants_follow_the_steering_parameters() {
+    let config = MatcherConfig::defaults(qicp_matchers::MatcherKind::QWsm);
+    let all = all_variants(&config);
+    let parameters = config.steering_parameters();
+    assert_eq!(all.len(), InputVariant::ALL.len() + 2 * parameters.len());
+    assert!(all.iter().any(|v| v.name == "icp.max_dist_start*0.7"));
+    assert!(all.iter().any(|v| v.name == "icp.max_dist_start*1.4"));
+    let names = [
+        "odom-bias".to_string(),
+        "scans/2".to_string(),
+        "default".to_string(),
+    ];
+    let picked = select_variants(all.clone(), &names).expect("known");
+    let picked: Vec<&str> = picked.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(picked, ["scans/2", "odom-bias"]);
+    let err = select_variants(all, &["nope".to_string()]).expect_err("unknown");
+    let msg = err.to_string();
+    assert!(msg.contains("nope") && msg.contains("beams/2"), "{msg}");
+}
+
+#[test]
+fn parallel_results_are_in_item_order_and_panics_are_errors() {
+    let items: Vec<u32> = (0..20).collect();
+    for jobs in [1, 3, 64] {
+        let mut seen = 0;
+        let out = run_parallel(
+            &items,
+            jobs,
+            |&i| {
+                if i == 7 {
+                    panic!("seven");
+                }
+                Ok(i * 2)
+            },
+            |_, _, _| seen += 1,
+        );
+        assert_eq!(seen, 20);
+        for (i, r) in out.iter().enumerate() {
+            match r {
+                Ok(v) => assert_eq!(*v as usize, i * 2),
+                Err(e) => assert!(i == 7 && e.contains("seven"), "{e}"),
+            }
+        }
+    }
+}
