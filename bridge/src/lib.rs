@@ -8,7 +8,9 @@
 //! - [`messages`]: the `#[repr(C)]` wire types ([`ScanHeader`] + a slice of ranges,
 //!   [`PoseMessage`], the end-of-stream marker) and their conversions to [`qicp_core`] types;
 //! - [`ScanPublisher`], [`ScanSubscriber`], [`PosePublisher`], [`PoseSubscriber`]: typed ports
-//!   on the services `<prefix>/scan` and `<prefix>/pose` (see [`Topics`]);
+//!   on the services `<prefix>/scan` and `<prefix>/pose` (see [`Topics`]), all one generic
+//!   [`Publisher`] and [`Subscriber`] over the stream's [`Message`] type ([`ScanStream`],
+//!   [`PoseStream`]);
 //! - [`sequence`]: the sequence-number bookkeeping that makes every loss visible;
 //! - [`payload`]: opaque byte payloads of any size, written and read in place (what
 //!   `qicp bench bridge --sizes` measures against a Unix-domain socket);
@@ -32,8 +34,8 @@ pub use messages::{LAYOUT_VERSION, PoseC, PoseMessage, ScanHeader, publisher_ide
 pub use sequence::{Admission, SequenceTracker, StreamEnd, StreamReport};
 pub use transport::payload;
 pub use transport::{
-    BackPressure, DEFAULT_PREFIX, MAX_PUBLISHERS, MAX_SUBSCRIBERS, POSE_BUFFER_MAX,
-    POSE_HISTORY_MAX, PosePublisher, PoseSubscriber, PublisherOptions, SCAN_BUFFER_MAX,
-    SCAN_HISTORY_MAX, ScanPublisher, ScanSubscriber, ScanView, StreamEvent, SubscriberOptions,
-    Topics, WaitOptions, event_id,
+    BackPressure, DEFAULT_PREFIX, MAX_PUBLISHERS, MAX_SUBSCRIBERS, Message, POSE_BUFFER_MAX,
+    POSE_HISTORY_MAX, PosePublisher, PoseStream, PoseSubscriber, Publisher, PublisherOptions,
+    SCAN_BUFFER_MAX, SCAN_HISTORY_MAX, ScanPublisher, ScanStream, ScanSubscriber, ScanView,
+    StreamEvent, Subscriber, SubscriberOptions, Topics, WaitOptions, event_id,
 };

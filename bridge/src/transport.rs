@@ -1,4 +1,9 @@
-//! The iceoryx2 side: services, typed publishers and subscribers, waiting.
+//! The iceoryx2 side: services, publishers and subscribers, waiting.
+//!
+//! One generic port of each kind, [`Publisher<M>`] and [`Subscriber<M>`], serves both streams;
+//! what differs between a scan and a pose ([`Message`]: a slice of ranges behind a header, or
+//! one fixed-size message) is in `streams`. [`ScanPublisher`], [`PosePublisher`],
+//! [`ScanSubscriber`] and [`PoseSubscriber`] are those ports on each stream.
 //!
 //! Each stream is two iceoryx2 services of the same name: a publish-subscribe service carrying
 //! the messages and an event service that wakes the other side (a sample was sent, a subscriber
@@ -21,12 +26,13 @@ use crate::sequence::{Admission, Observation, SequenceTracker, StreamEnd, Stream
 use iceoryx2::config::Config;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
-use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::publisher::{Publisher as IoxPublisher, PublisherCreateError};
+use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
+use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::builder::publish_subscribe::{
     PublishSubscribeCreateError, PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
 };
@@ -43,14 +49,16 @@ mod options;
 pub mod payload;
 mod publish;
 mod signals;
+mod streams;
 mod subscribe;
 
 pub use options::{
     BackPressure, PublisherOptions, ScanView, StreamEvent, SubscriberOptions, WaitOptions,
 };
-pub use publish::{PosePublisher, ScanPublisher};
+pub use publish::{PosePublisher, Publisher, ScanPublisher};
 use signals::{PublisherCore, Signals};
-pub use subscribe::{PoseSubscriber, ScanSubscriber};
+pub use streams::{Message, PoseStream, ScanStream};
+pub use subscribe::{PoseSubscriber, ScanSubscriber, Subscriber};
 
 /// The default service prefix: services `qicp/scan` and `qicp/pose`.
 pub const DEFAULT_PREFIX: &str = "qicp";
@@ -264,32 +272,6 @@ fn create_owner<P>(
         }
         other => other.map_err(fail),
     }
-}
-
-fn scan_service_builder(
-    node: &Node<Ipc>,
-    name: &ServiceName,
-) -> iceoryx2::service::builder::publish_subscribe::Builder<[f64], ScanHeader, Ipc> {
-    node.service_builder(name)
-        .publish_subscribe::<[f64]>()
-        .user_header::<ScanHeader>()
-        .history_size(SCAN_HISTORY_MAX)
-        .subscriber_max_buffer_size(SCAN_BUFFER_MAX)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_publishers(MAX_PUBLISHERS)
-}
-
-fn pose_service_builder(
-    node: &Node<Ipc>,
-    name: &ServiceName,
-) -> iceoryx2::service::builder::publish_subscribe::Builder<PoseMessage, (), Ipc> {
-    node.service_builder(name)
-        .publish_subscribe::<PoseMessage>()
-        .enable_safe_overflow(true)
-        .history_size(POSE_HISTORY_MAX)
-        .subscriber_max_buffer_size(POSE_BUFFER_MAX)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_publishers(MAX_PUBLISHERS)
 }
 
 fn open_error(service: &str, requested: BackPressure, e: impl std::fmt::Debug) -> ConnectError {

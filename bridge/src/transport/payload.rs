@@ -75,9 +75,9 @@ pub struct PayloadPublisher {
 impl PayloadPublisher {
     /// Creates the service (its subscriber buffers `buffer` payloads) and the publisher, whose
     /// shared memory is sized once for `max_bytes`. `notify`: signal a `SAMPLE` event after
-    /// each send, for a subscriber that waits on events ([`PayloadSubscriber::wait`]); a
-    /// subscriber that polls needs none. A send waits at most `block_timeout` for a full
-    /// subscriber, then fails.
+    /// each send, for a subscriber that waits on events ([`PayloadSubscriber::run`] with
+    /// [`Waiting::Event`]); a subscriber that polls needs none. A send waits at most
+    /// `block_timeout` for a full subscriber, then fails.
     pub fn create(
         topics: &Topics,
         max_bytes: usize,
