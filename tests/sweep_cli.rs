@@ -245,7 +245,9 @@ fn sweep_bounds_hold_on_the_first_3000_intel_scans() {
         ),
         (
             "q-idc",
-            "scans/2,odom-noise,icp.max_dist_start*0.7,motion.sigma_xy_per_m*0.7,\
+            // beams/2 guards IDC's end window against a coarser laser (0.286 m when the
+            // window stayed at 1° for 2° between beams).
+            "scans/2,beams/2,odom-noise,icp.max_dist_start*0.7,motion.sigma_xy_per_m*0.7,\
              relevance.map_resolution*1.4",
         ),
     ] {

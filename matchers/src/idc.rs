@@ -64,13 +64,12 @@ impl<C: CorrespondenceMetric> Idc<C> {
         start: Pose2,
         guess: &Pose2,
         prior: Option<&Matrix3<f64>>,
-        first_window_deg: f64,
+        (first_window_deg, end_deg): (f64, f64),
         first_level: u32,
     ) -> Result<(Pose2, u32, bool), Fallback> {
         let mut pose = start;
         let mut schedule = Schedule::at(first_level);
         let last_level = self.icp.last_level();
-        let end_deg = self.params.window_end_deg;
         for it in 0..self.icp.max_iterations {
             let gate = self.icp.gate(schedule.level);
             // Lu & Milios: the window Bw shrinks as the estimate converges.
@@ -199,7 +198,10 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             && guess_misfit
                 > SUSPECT_GUESS * local.len() as f64 * VERIFY_DISTANCE * VERIFY_DISTANCE;
         let prior = if suspect { None } else { prior.as_ref() };
-        let window = self.params.first_window_deg(prior);
+        let end = self
+            .params
+            .end_window_deg(scan.geometry.angle_increment.to_degrees());
+        let window = (self.params.first_window_deg(prior, end), end);
         let first_level = self.params.first_level(&self.icp, prior);
         let (mut pose, mut iterations, mut converged) =
             match self.iterate(reference, local, guess, &guess, prior, window, first_level) {
