@@ -11,6 +11,7 @@
 //!   normals, spacing and covariance).
 #![warn(missing_docs)]
 
+pub mod config_error;
 #[cfg(feature = "testkit")]
 pub mod conformance;
 pub mod index;
@@ -26,6 +27,7 @@ pub mod scan;
 #[cfg(feature = "testkit")]
 pub mod testdata;
 
+pub use config_error::ConfigError;
 pub use index::{BruteForce, IndexError, Neighbour, PointId, SpatialIndex, dist_sq};
 pub use kdtree::KdTree;
 pub use matcher::ScanMatcher;

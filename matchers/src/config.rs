@@ -27,40 +27,8 @@ use crate::wsm::Wsm;
 use qicp_core::{KdTree, LaserNoise, MutualNearest, QuadTree};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use thiserror::Error;
 
-/// A configuration that cannot be used.
-#[derive(Debug, Error, Clone, PartialEq)]
-pub enum ConfigError {
-    /// The TOML does not parse or does not fit the schema (unknown key, wrong type…).
-    #[error("{0}")]
-    Parse(String),
-    /// A value is out of range.
-    #[error("`{key}`: {why}")]
-    Invalid {
-        /// Dotted path of the key.
-        key: String,
-        /// What is wrong.
-        why: String,
-    },
-    /// A section the chosen kind does not use.
-    #[error("`{key}` is not used by matcher kind `{kind}`")]
-    Unused {
-        /// Dotted path of the section.
-        key: String,
-        /// The chosen kind.
-        kind: String,
-    },
-}
-
-impl ConfigError {
-    pub(crate) fn invalid(key: &str, why: impl Into<String>) -> Self {
-        Self::Invalid {
-            key: key.into(),
-            why: why.into(),
-        }
-    }
-}
+pub use qicp_core::ConfigError;
 
 /// The six built-in presets: shorthands for an algorithm, a reference and an index (any
 /// algorithm registered later composes the same way; see [`Registry::resolve`]).

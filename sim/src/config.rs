@@ -22,7 +22,6 @@
 
 use serde::{Deserialize, Serialize};
 use std::path::Path;
-use thiserror::Error;
 
 mod robot;
 mod validate;
@@ -31,30 +30,7 @@ mod world;
 pub use robot::{DriveConfig, LaserConfig, RobotConfig};
 pub use world::{CorridorConfig, ObstacleConfig, ParkConfig, WorldConfig, WorldKind};
 
-/// Why a configuration was refused.
-#[derive(Debug, Error)]
-pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// The text is not valid TOML for this schema (unknown key, unknown world kind, wrong type).
-    /// The message names the key and shows the offending line.
-    #[error("invalid simulation config: {0}")]
-    Parse(String),
-    /// A value parses but cannot work.
-    #[error("invalid simulation config: `{key}` {why}")]
-    Invalid {
-        /// Dotted path of the key, e.g. `laser.beams`.
-        key: &'static str,
-        /// What is wrong with it.
-        why: String,
-    },
-}
+pub use qicp_core::ConfigError;
 
 /// The whole drive: world, robot, laser, route and timing.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]

@@ -10,7 +10,7 @@ fn refused(text: &str) -> String {
     }
 }
 
-fn invalid_key(text: &str) -> &'static str {
+fn invalid_key(text: &str) -> String {
     match SimConfig::from_toml_str(text) {
         Err(ConfigError::Invalid { key, .. }) => key,
         other => panic!("expected an invalid value, got {other:?}"),

@@ -2,43 +2,12 @@
 
 use super::*;
 
-/// An experiment configuration that cannot be used.
-#[derive(Debug, Error)]
-pub enum ExperimentError {
-    /// The file cannot be read.
-    #[error("reading {path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// The TOML does not parse or does not fit the schema (unknown key, wrong type…).
-    #[error("{0}")]
-    Parse(String),
-    /// A value is missing, contradictory or out of range.
-    #[error("`{key}`: {why}")]
-    Invalid {
-        /// Dotted path of the key.
-        key: String,
-        /// What is wrong.
-        why: String,
-    },
-    /// A per-kind matcher table is not a valid matcher configuration.
-    #[error("`matchers.{kind}`: {source}")]
-    Matcher {
-        /// The kind whose table is wrong.
-        kind: String,
-        /// What the matcher registry said.
-        source: qicp_matchers::ConfigError,
-    },
-}
+/// An experiment configuration that cannot be used: the one configuration error of every
+/// qicp file, a per-kind matcher table's error nested under `matchers.<kind>`.
+pub type ExperimentError = qicp_core::ConfigError;
 
 pub(super) fn invalid(key: &str, why: impl Into<String>) -> ExperimentError {
-    ExperimentError::Invalid {
-        key: key.into(),
-        why: why.into(),
-    }
+    ExperimentError::invalid(key, why)
 }
 
 /// `[source]`: where the records come from. Exactly one of `sim` and `log`.
@@ -314,18 +283,15 @@ impl ExperimentConfig {
     /// The effective configuration of `kind`: its registry defaults, overridden by its
     /// `[matchers.<kind>]` table.
     pub fn matcher(&self, kind: &str) -> Result<MatcherConfig, ExperimentError> {
-        let err = |source| ExperimentError::Matcher {
-            kind: kind.into(),
-            source,
-        };
+        let err = |e: ExperimentError| e.inside(format!("matchers.{kind}"));
         let Some(table) = self.matchers.get(kind) else {
             return crate::registry().config(kind).map_err(err);
         };
         if table.contains_key("kind") {
-            return Err(err(qicp_matchers::ConfigError::Invalid {
-                key: "kind".into(),
-                why: "the table's name is the kind; drop `kind`".into(),
-            }));
+            return Err(err(ExperimentError::invalid(
+                "kind",
+                "the table's name is the kind; drop `kind`",
+            )));
         }
         let mut matcher = table.clone();
         matcher.insert("kind".into(), toml::Value::String(kind.into()));
@@ -342,10 +308,9 @@ impl ExperimentConfig {
         let mut c = self.clone();
         for kind in &self.run.matchers {
             let m = self.matcher(kind)?;
-            let mut value = m.to_table().map_err(|source| ExperimentError::Matcher {
-                kind: kind.clone(),
-                source,
-            })?;
+            let mut value = m
+                .to_table()
+                .map_err(|e| e.inside(format!("matchers.{kind}")))?;
             for axis in ["algorithm", "reference", "index"] {
                 value.remove(axis);
             }

@@ -54,7 +54,6 @@ use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use thiserror::Error;
 
 mod config;
 mod pictures;

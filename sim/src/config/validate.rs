@@ -234,7 +234,7 @@ fn validate_obstacle(o: &ObstacleConfig) -> Result<(), ConfigError> {
 }
 
 fn invalid(key: &'static str, why: String) -> Result<(), ConfigError> {
-    Err(ConfigError::Invalid { key, why })
+    Err(ConfigError::invalid(key, why))
 }
 
 fn positive(key: &'static str, v: f64) -> Result<(), ConfigError> {
