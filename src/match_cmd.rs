@@ -220,6 +220,30 @@ pub fn run(args: MatchArgs) -> Result<()> {
     Ok(())
 }
 
+/// One line per declared parameter: its default (from `section`), range, whether the sweep
+/// perturbs it, and its documentation.
+fn write_parameters(
+    out: &mut String,
+    params: &[qicp_matchers::Param],
+    section: Option<&toml::Table>,
+) -> std::fmt::Result {
+    use std::fmt::Write;
+    for p in params {
+        let value = section
+            .and_then(|s| s.get(p.key))
+            .map_or_else(|| "?".into(), ToString::to_string);
+        let steering = if p.steering { " [swept]" } else { "" };
+        writeln!(
+            out,
+            "    {} = {value}  ({}){steering}: {}",
+            p.key,
+            p.range.describe(),
+            p.doc
+        )?;
+    }
+    Ok(())
+}
+
 /// What `qicp matchers` prints: every algorithm with its parameters (default, range, doc),
 /// the indexes and reference policies, and the composed names.
 pub fn listing(registry: &qicp_matchers::Registry) -> Result<String> {
@@ -233,19 +257,7 @@ pub fn listing(registry: &qicp_matchers::Registry) -> Result<String> {
         let defaults = registry.config(name)?.to_table()?;
         let section = defaults.get(name).and_then(toml::Value::as_table);
         writeln!(out, "  {name}: {summary}")?;
-        for p in params {
-            let value = section
-                .and_then(|s| s.get(p.key))
-                .map_or_else(|| "?".into(), ToString::to_string);
-            let steering = if p.steering { " [swept]" } else { "" };
-            writeln!(
-                out,
-                "    {} = {value}  ({}){steering}: {}",
-                p.key,
-                p.range.describe(),
-                p.doc
-            )?;
-        }
+        write_parameters(&mut out, params, section)?;
     }
     let laser = qicp_matchers::MatcherConfig::from_toml("[matcher]\nkind = \"wsm\"")?.to_table()?;
     let laser = laser.get("laser").and_then(toml::Value::as_table);
@@ -253,19 +265,7 @@ pub fn listing(registry: &qicp_matchers::Registry) -> Result<String> {
         out,
         "laser noise ([matcher.laser], every algorithm; [swept] where the algorithm weighs by it):"
     )?;
-    for p in qicp_matchers::LASER_PARAMETERS {
-        let value = laser
-            .and_then(|s| s.get(p.key))
-            .map_or_else(|| "?".into(), ToString::to_string);
-        let steering = if p.steering { " [swept]" } else { "" };
-        writeln!(
-            out,
-            "    {} = {value}  ({}){steering}: {}",
-            p.key,
-            p.range.describe(),
-            p.doc
-        )?;
-    }
+    write_parameters(&mut out, qicp_matchers::LASER_PARAMETERS, laser)?;
     writeln!(
         out,
         "indexes ([matcher] index = NAME; prefix of composed names):"
