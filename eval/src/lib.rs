@@ -146,14 +146,32 @@ mod tests {
                     }
                 })
                 .collect();
-            let mut probe = RelationProbe::new(&relations, 0.1).unwrap();
-            for (t, p) in &traj {
-                probe.push(*t, *p).unwrap();
+            // In time order, and shuffled (a bag's scans come in bag order): the probe picks
+            // what scoring the whole trajectory, sorted stably by time, picks.
+            let mut shuffled = traj.clone();
+            for i in (1..shuffled.len()).rev() {
+                shuffled.swap(i, rng.random_range(0..=i));
             }
             let whole = evaluate_relations(&traj, &relations, 0.1).unwrap();
-            let probed = evaluate_relations(&probe.trajectory(), &relations, 0.1).unwrap();
-            assert_eq!(format!("{whole:?}"), format!("{probed:?}"), "round {round}");
-            assert!(probe.trajectory().len() <= 2 * relations.len());
+            for order in [&traj, &shuffled] {
+                let mut probe = RelationProbe::new(&relations, 0.1).unwrap();
+                for (t, p) in order {
+                    probe.push(*t, *p).unwrap();
+                }
+                let whole_of_order = evaluate_relations(order, &relations, 0.1).unwrap();
+                let probed = evaluate_relations(&probe.trajectory(), &relations, 0.1).unwrap();
+                assert_eq!(
+                    format!("{whole_of_order:?}"),
+                    format!("{probed:?}"),
+                    "round {round}"
+                );
+                assert!(probe.trajectory().len() <= 2 * relations.len());
+            }
+            // Shuffling moves only which of the poses at one time is picked.
+            assert_eq!(
+                whole.n,
+                evaluate_relations(&shuffled, &relations, 0.1).unwrap().n
+            );
         }
     }
 
@@ -173,11 +191,20 @@ mod tests {
     }
 
     #[test]
-    fn relation_probe_refuses_poses_out_of_time_order() {
-        let mut probe = RelationProbe::new(&[], 0.1).unwrap();
-        probe.push(2.0, Pose2::IDENTITY).unwrap();
+    fn a_relation_probe_takes_poses_out_of_time_order_and_refuses_a_nan_time() {
+        let relations = [Relation {
+            t1: 1.0,
+            t2: 2.0,
+            delta: Pose2::new(1.0, 0.0, 0.0),
+        }];
+        let mut probe = RelationProbe::new(&relations, 0.1).unwrap();
+        probe.push(2.0, Pose2::new(1.0, 0.0, 0.0)).unwrap();
+        probe.push(1.0, Pose2::IDENTITY).unwrap();
+        let report = evaluate_relations(&probe.trajectory(), &relations, 0.1).unwrap();
+        assert_eq!(report.n, 1);
+        assert!(report.trans_max < 1e-12);
         assert!(matches!(
-            probe.push(1.0, Pose2::IDENTITY),
+            probe.push(f64::NAN, Pose2::IDENTITY),
             Err(EvalError::OutOfOrder { .. })
         ));
     }

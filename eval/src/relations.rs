@@ -89,22 +89,21 @@ pub fn relation_errors(
     Ok((errors, missing))
 }
 
-/// Picks from a trajectory streamed in time order the poses that relations need, so that a
-/// long run is scored in memory that grows with the relations, not with the poses.
+/// Picks from a streamed trajectory the poses that relations need, so that a long run is
+/// scored in memory that grows with the relations, not with the poses.
 ///
-/// [`RelationProbe::trajectory`] holds, for every relation time, the pose
-/// [`nearest_index`] would pick from the whole trajectory (the same tie rule), so
-/// [`evaluate_relations`] on it gives the figures of the whole trajectory.
+/// [`RelationProbe::trajectory`] holds, for every relation time, the pose [`nearest_index`]
+/// would pick from the whole trajectory sorted by time (a stable sort, so poses of one time
+/// keep their order; the same tie rule), so [`evaluate_relations`] on it gives the figures of
+/// the whole trajectory. Poses may come in any order: a ROS 2 bag's scans come in bag order,
+/// which is not always time order.
 #[derive(Debug, Clone)]
 pub struct RelationProbe {
     /// Relation times, sorted, without repeats.
     times: Vec<f64>,
     /// Best pose so far for each time.
     best: Vec<Option<Stamped>>,
-    /// First time a later pose can still improve.
-    lo: usize,
     max_dt: f64,
-    last: f64,
 }
 
 impl RelationProbe {
@@ -117,25 +116,20 @@ impl RelationProbe {
         Ok(Self {
             best: vec![None; times.len()],
             times,
-            lo: 0,
             max_dt,
-            last: f64::NEG_INFINITY,
         })
     }
 
-    /// Offers the next pose of the trajectory; poses must come in time order.
+    /// Offers the next pose of the trajectory. A NaN time is refused.
     pub fn push(&mut self, t: f64, pose: Pose2) -> Result<(), EvalError> {
-        if t < self.last || t.is_nan() {
+        if t.is_nan() {
             return Err(EvalError::OutOfOrder {
                 t,
-                previous: self.last,
+                previous: f64::NAN,
             });
         }
-        self.last = t;
-        while self.lo < self.times.len() && self.times[self.lo] < t - self.max_dt {
-            self.lo += 1;
-        }
-        for i in self.lo..self.times.len() {
+        let first = self.times.partition_point(|&w| w < t - self.max_dt);
+        for i in first..self.times.len() {
             let want = self.times[i];
             if want > t + self.max_dt {
                 break;
@@ -143,10 +137,12 @@ impl RelationProbe {
             let d = (t - want).abs();
             let better = match self.best[i] {
                 None => true,
-                // As `nearest_index`: the last pose before `want` wins a tie with one after.
+                // As `nearest_index` on the stably sorted trajectory: the nearer pose wins; of
+                // two as near, one before `want` beats one after it, and of two at one time
+                // the later beats the earlier before `want`, not from `want` on.
                 Some((s, _)) => {
                     let held = (s - want).abs();
-                    if t < want { d <= held } else { d < held }
+                    d < held || (d == held && t < want)
                 }
             };
             if better {

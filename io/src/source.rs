@@ -26,7 +26,8 @@ impl Default for LogOptions {
     }
 }
 
-/// The records of a log, streamed in time order, whatever its format.
+/// The records of a log, streamed, whatever its format: a CARMEN log's in time order (lines
+/// put back in order within a window), a bag's in bag order (which a late scan can break).
 #[derive(Debug)]
 pub enum LogReader {
     /// A CARMEN log.
