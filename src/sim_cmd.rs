@@ -137,7 +137,7 @@ fn load_drive(path: &Path) -> Result<SimConfig> {
         .map(|t| t.contains_key("source"))
         .unwrap_or(false);
     if !is_experiment {
-        return Ok(SimConfig::load(path)?);
+        return SimConfig::load(path).with_context(|| format!("drive {}", path.display()));
     }
     let experiment = crate::experiment::ExperimentConfig::load(path)?;
     let Some(sim) = &experiment.source.sim else {

@@ -91,6 +91,8 @@ pub struct PlIcpAlgorithm;
 
 impl Algorithm for PlIcpAlgorithm {
     const NAME: &'static str = "plicp";
+    /// A pair's weight holds the reference point's covariance, from the laser's noise.
+    const WEIGHS_BY_LASER_NOISE: bool = true;
     const SUMMARY: &'static str = "point-to-line ICP with the exact solution (Censi 2008)";
     const PARAMETERS: &'static [Param] = &[
         Param::steering(

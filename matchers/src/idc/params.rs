@@ -20,7 +20,8 @@ pub struct IdcParams {
     /// step ([`IdcParams::end_window_deg`]). Default 1.
     pub window_end_deg: f64,
     /// With an odometry prior, the first window is this many of the prior's rotation standard
-    /// deviations instead (within window_end_deg…window_start_deg): Lu & Milios size Bw to the
+    /// deviations instead (between the end window, [`IdcParams::end_window_deg`], and
+    /// window_start_deg): Lu & Milios size Bw to the
     /// rotation error they expect, and a window far wider than odometry's error only lets
     /// the range rule jump to wrong rotations. 0 always starts at window_start_deg.
     /// Default 2.
@@ -144,7 +145,9 @@ impl IdcParams {
     /// `window_start_deg`). A window narrower than the step between the laser's beams holds
     /// reference points of one bearing only, and the range rule then pairs by chance: on the
     /// Intel log with every second beam (2° apart), q-idc's relation error was 0.147 m at a
-    /// 1° end window and is 0.027 m at 2°. Lasers at 1° or finer keep `window_end_deg`.
+    /// 1° end window and is 0.027 m at 2°. Lasers at 1° or finer keep `window_end_deg`. A
+    /// laser whose beams lie `window_start_deg` or more apart gets no narrowing window, so
+    /// the closest-point rule alone matches it.
     #[must_use]
     pub fn end_window_deg(&self, bearing_step_deg: f64) -> f64 {
         let step = bearing_step_deg.abs();
