@@ -11,40 +11,7 @@ Python. A log fed through :class:`Matcher` gives the trajectory ``qicp match`` w
     print(qicp.evaluate_relations(traj, "intel.relations")["trans_mean"])
 """
 
-from ._qicp import (
-    Log,
-    Matcher,
-    MatchResult,
-    QicpError,
-    Record,
-    __version__,
-    ate,
-    evaluate_relations,
-    matcher_names,
-    read_bag,
-    read_carmen,
-    read_tum,
-    sweep_report,
-    sweep_run,
-    sweep_variants,
-    write_tum,
-)
-
-__all__ = [
-    "Log",
-    "Matcher",
-    "MatchResult",
-    "QicpError",
-    "Record",
-    "__version__",
-    "ate",
-    "evaluate_relations",
-    "matcher_names",
-    "read_bag",
-    "read_carmen",
-    "read_tum",
-    "sweep_report",
-    "sweep_run",
-    "sweep_variants",
-    "write_tum",
-]
+# The extension lists its names once (`_qicp.__all__`, typed in `_qicp.pyi`); the package
+# re-exports exactly those.
+from ._qicp import *  # noqa: F401,F403
+from ._qicp import __all__ as __all__
