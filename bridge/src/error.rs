@@ -173,6 +173,20 @@ pub enum ReceiveError {
         /// This build's version.
         expected: u32,
     },
+    /// A scan arrived but cannot become a record (a pose that is not finite or off the map,
+    /// a bad beam geometry): yielded by [`Records`](crate::Records), which goes on with the
+    /// next scan.
+    #[error("scan {seq} of publisher {publisher:#x} on {service:?} rejected: {source}")]
+    Rejected {
+        /// The service.
+        service: String,
+        /// The scan's sequence number.
+        seq: u64,
+        /// The scan's publisher ([`ScanHeader::publisher`](crate::ScanHeader::publisher)).
+        publisher: u64,
+        /// Why it is not a record.
+        source: qicp_core::ScanError,
+    },
 }
 
 pub(crate) fn detail(e: impl std::fmt::Debug) -> String {

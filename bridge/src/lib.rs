@@ -11,6 +11,9 @@
 //!   on the services `<prefix>/scan` and `<prefix>/pose` (see [`Topics`]), all one generic
 //!   [`Publisher`] and [`Subscriber`] over the stream's [`Message`] type ([`ScanStream`],
 //!   [`PoseStream`]);
+//! - [`ScanSubscriber::records`]: the scans as an iterator of owned records ([`Records`]),
+//!   which is a `qicp_io::RecordSource` (by that trait's blanket impl over iterators of
+//!   `Result<Record, E>`), so a matcher reads the bridge as it reads a log or the simulator;
 //! - [`sequence`]: the sequence-number bookkeeping that makes every loss visible;
 //! - [`payload`]: opaque byte payloads of any size, written and read in place (what
 //!   `qicp bench bridge --sizes` measures against a Unix-domain socket);
@@ -36,6 +39,6 @@ pub use transport::payload;
 pub use transport::{
     BackPressure, DEFAULT_PREFIX, MAX_PUBLISHERS, MAX_SUBSCRIBERS, Message, POSE_BUFFER_MAX,
     POSE_HISTORY_MAX, PosePublisher, PoseStream, PoseSubscriber, Publisher, PublisherOptions,
-    SCAN_BUFFER_MAX, SCAN_HISTORY_MAX, ScanPublisher, ScanStream, ScanSubscriber, ScanView,
-    StreamEvent, Subscriber, SubscriberOptions, Topics, WaitOptions, event_id,
+    Records, SCAN_BUFFER_MAX, SCAN_HISTORY_MAX, ScanPublisher, ScanStream, ScanSubscriber,
+    ScanView, StreamEvent, Subscriber, SubscriberOptions, Topics, WaitOptions, event_id,
 };

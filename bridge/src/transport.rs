@@ -48,6 +48,8 @@ use std::time::{Duration, Instant};
 mod options;
 pub mod payload;
 mod publish;
+mod receive;
+mod records;
 mod signals;
 mod streams;
 mod subscribe;
@@ -56,6 +58,7 @@ pub use options::{
     BackPressure, PublisherOptions, ScanView, StreamEvent, SubscriberOptions, WaitOptions,
 };
 pub use publish::{PosePublisher, Publisher, ScanPublisher};
+pub use records::Records;
 use signals::{PublisherCore, Signals};
 pub use streams::{Message, PoseStream, ScanStream};
 pub use subscribe::{PoseSubscriber, ScanSubscriber, Subscriber};

@@ -2,9 +2,11 @@
 //!
 //! Where records and trajectories come from and go to: CARMEN logs (`carmen`, read whole or
 //! streamed in bounded memory), TUM trajectories (`tum`), Freiburg benchmark relations
-//! (`relations`), ROS 2 bags in MCAP storage (`rosbag`, read streamed and written). A [`RecordSource`] yields records in time order: the streaming CARMEN
-//! reader here and the simulator (`qicp-sim`) alike (the bridge subscriber is driven by its
-//! transport's callbacks instead).
+//! (`relations`), ROS 2 bags in MCAP storage (`rosbag`, read streamed and written). A
+//! [`RecordSource`] yields records in time order: the streaming CARMEN reader here, the
+//! simulator (`qicp-sim`) and the bridge's scan subscriber (`qicp_bridge::Records`, from
+//! `ScanSubscriber::records`) alike, all through the blanket impl for iterators of
+//! `Result<Record, E>` (so `qicp-bridge` does not depend on this crate).
 //!
 //! Every reader names the file and the 1-based line of the first problem it meets; none
 //! panics on bad input.
@@ -22,7 +24,8 @@ pub use source::{LogOptions, LogReader};
 /// Records in time order, one at a time: what a matcher is fed.
 ///
 /// Implemented by every iterator of `Result<Record, E>` (the streaming CARMEN reader, the
-/// simulator's drive), so a run is written once for all of them.
+/// simulator's drive, the bridge's `qicp_bridge::Records`), so a run is written once for all
+/// of them.
 pub trait RecordSource {
     /// Why a record could not be produced.
     type Error: std::error::Error + Send + Sync + 'static;
