@@ -270,6 +270,44 @@ impl SequenceTracker {
 mod tests {
     use super::*;
 
+    /// `summary.json`'s `bridge` object embeds the report: its keys, and `end` by name
+    /// ("running" until the stream ends).
+    #[test]
+    fn a_stream_report_serialises_with_its_end_by_name() {
+        let running = serde_json::to_value(StreamReport::default()).expect("serialises");
+        let keys: Vec<&str> = running
+            .as_object()
+            .expect("an object")
+            .keys()
+            .map(String::as_str)
+            .collect();
+        let mut want = [
+            "received",
+            "missed_before_join",
+            "gap_events",
+            "missing",
+            "out_of_order",
+            "publishers_seen",
+            "publishers_lost",
+            "intruders",
+            "announced",
+            "end",
+        ];
+        want.sort_unstable();
+        let mut got = keys.clone();
+        got.sort_unstable();
+        assert_eq!(got, want);
+        assert_eq!(running["end"], "running");
+        assert!(running["announced"].is_null());
+        let mut t = SequenceTracker::new();
+        t.observe(1, 0);
+        t.end_of_stream(1, 1);
+        let ended = serde_json::to_value(t.finish(StreamEnd::EndOfStream)).expect("serialises");
+        assert_eq!(ended["end"], "end_of_stream");
+        assert_eq!(ended["received"], 1);
+        assert_eq!(ended["announced"], 1);
+    }
+
     #[test]
     fn in_order_stream_is_complete() {
         let mut t = SequenceTracker::new();
