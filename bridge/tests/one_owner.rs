@@ -2,16 +2,19 @@
 //! a service that would allow two is not joined, every message names its publisher, and a
 //! `block` publisher whose subscribers all left fails instead of sending into nothing.
 
+mod common;
+
+use common::quick_wait;
 use qicp_bridge::{
     ConnectError, PosePublisher, PublishError, PublisherOptions, ScanHeader, ScanPublisher,
-    ScanSubscriber, StreamEvent, SubscriberOptions, Topics, WaitOptions,
+    ScanSubscriber, StreamEvent, SubscriberOptions, Topics,
 };
 use qicp_core::{BeamGeometry, Pose2, Record, Scan};
 use std::ops::ControlFlow;
 use std::time::Duration;
 
 fn topics(test: &str) -> Topics {
-    Topics::new(&format!("qicp-owner-{}-{test}", std::process::id()))
+    common::topics("owner", test)
 }
 
 fn record(i: usize) -> Record {
@@ -21,15 +24,6 @@ fn record(i: usize) -> Record {
         odometry: Pose2::new(i as f64, 0.0, 0.0),
         truth: None,
         laser_offset: Pose2::IDENTITY,
-    }
-}
-
-fn quick_wait() -> WaitOptions {
-    WaitOptions {
-        connect_timeout: Duration::from_secs(10),
-        reconnect_timeout: Duration::from_secs(2),
-        idle_timeout: Duration::from_secs(10),
-        tick: Duration::from_millis(50),
     }
 }
 

@@ -3,37 +3,18 @@
 //! ended, a scan that cannot become a record is an `Err` item the iteration goes past, and
 //! the iterator fits `qicp_io::RecordSource`'s blanket impl.
 
+mod common;
+
+use common::{quick_wait, record};
 use qicp_bridge::{
     PublisherOptions, ReceiveError, Records, ScanPublisher, ScanSubscriber, StreamEnd,
     SubscriberOptions, Topics, WaitOptions,
 };
-use qicp_core::{BeamGeometry, Pose2, Record, Scan};
+use qicp_core::Record;
 use std::time::Duration;
 
 fn topics(test: &str) -> Topics {
-    Topics::new(&format!("qicp-records-{}-{test}", std::process::id()))
-}
-
-fn record(i: usize) -> Record {
-    let geometry = BeamGeometry::centered(181, std::f64::consts::PI, 20.0);
-    let ranges = (0..181)
-        .map(|b| 1.0 + (i * 181 + b) as f64 * 1e-3)
-        .collect();
-    Record {
-        scan: Scan::new(i as f64 * 0.1, geometry, ranges).expect("scan"),
-        odometry: Pose2::new(i as f64, 0.5, 0.01 * i as f64),
-        truth: i.is_multiple_of(2).then(|| Pose2::new(i as f64, 0.0, 0.0)),
-        laser_offset: Pose2::IDENTITY,
-    }
-}
-
-fn quick_wait() -> WaitOptions {
-    WaitOptions {
-        connect_timeout: Duration::from_secs(10),
-        reconnect_timeout: Duration::from_secs(2),
-        idle_timeout: Duration::from_secs(10),
-        tick: Duration::from_millis(50),
-    }
+    common::topics("records", test)
 }
 
 fn subscriber(topics: &Topics) -> ScanSubscriber {

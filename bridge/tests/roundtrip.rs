@@ -1,38 +1,19 @@
 //! Publisher and subscriber in one process (two threads): every scan arrives intact, in
 //! order, read in place; the report is complete; poses round-trip the same way.
 
+mod common;
+
+use common::{quick_wait, record};
 use qicp_bridge::{
     BackPressure, PoseMessage, PosePublisher, PoseSubscriber, PublisherOptions, ScanPublisher,
     ScanSubscriber, StreamEnd, StreamEvent, SubscriberOptions, Topics, WaitOptions,
 };
-use qicp_core::{BeamGeometry, MatchResult, Pose2, Record, Scan};
+use qicp_core::{MatchResult, Pose2, Record};
 use std::ops::ControlFlow;
 use std::time::Duration;
 
 fn topics(test: &str) -> Topics {
-    Topics::new(&format!("qicp-test-{}-{test}", std::process::id()))
-}
-
-fn record(i: usize) -> Record {
-    let geometry = BeamGeometry::centered(181, std::f64::consts::PI, 20.0);
-    let ranges = (0..181)
-        .map(|b| 1.0 + (i * 181 + b) as f64 * 1e-3)
-        .collect();
-    Record {
-        scan: Scan::new(i as f64 * 0.1, geometry, ranges).expect("scan"),
-        odometry: Pose2::new(i as f64, 0.5, 0.01 * i as f64),
-        truth: i.is_multiple_of(2).then(|| Pose2::new(i as f64, 0.0, 0.0)),
-        laser_offset: Pose2::IDENTITY,
-    }
-}
-
-fn quick_wait() -> WaitOptions {
-    WaitOptions {
-        connect_timeout: Duration::from_secs(10),
-        reconnect_timeout: Duration::from_secs(2),
-        idle_timeout: Duration::from_secs(10),
-        tick: Duration::from_millis(50),
-    }
+    common::topics("test", test)
 }
 
 #[test]
