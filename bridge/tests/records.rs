@@ -8,7 +8,7 @@ mod common;
 use common::{quick_wait, record};
 use qicp_bridge::{
     PublisherOptions, ReceiveError, Records, ScanPublisher, ScanSubscriber, StreamEnd,
-    SubscriberOptions, Topics, WaitOptions,
+    SubscriberOptions, Topics,
 };
 use qicp_core::Record;
 use std::time::Duration;
@@ -126,17 +126,7 @@ fn a_scan_that_is_no_record_is_an_error_item() {
 
 #[test]
 fn no_publisher_ends_the_iteration() {
-    let mut subscriber = ScanSubscriber::create(
-        &topics("nobody"),
-        &SubscriberOptions {
-            wait: WaitOptions {
-                connect_timeout: Duration::from_millis(300),
-                ..quick_wait()
-            },
-            ..SubscriberOptions::default()
-        },
-    )
-    .expect("subscriber");
+    let mut subscriber = common::impatient_subscriber(&topics("nobody"));
     let mut records = subscriber.records().expect("records");
     assert!(records.next().is_none());
     assert_eq!(records.report().end, Some(StreamEnd::NoPublisher));

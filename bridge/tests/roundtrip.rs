@@ -6,7 +6,7 @@ mod common;
 use common::{quick_wait, record};
 use qicp_bridge::{
     BackPressure, PoseMessage, PosePublisher, PoseSubscriber, PublisherOptions, ScanPublisher,
-    ScanSubscriber, StreamEnd, StreamEvent, SubscriberOptions, Topics, WaitOptions,
+    ScanSubscriber, StreamEnd, StreamEvent, SubscriberOptions, Topics,
 };
 use qicp_core::{MatchResult, Pose2, Record};
 use std::ops::ControlFlow;
@@ -126,17 +126,7 @@ fn poses_round_trip() {
 
 #[test]
 fn no_publisher_times_out() {
-    let subscriber = ScanSubscriber::create(
-        &topics("nobody"),
-        &SubscriberOptions {
-            wait: WaitOptions {
-                connect_timeout: Duration::from_millis(300),
-                ..quick_wait()
-            },
-            ..SubscriberOptions::default()
-        },
-    )
-    .expect("subscriber");
+    let subscriber = common::impatient_subscriber(&topics("nobody"));
     let report = subscriber.run(|_| ControlFlow::Continue(())).expect("run");
     assert_eq!(report.end, Some(StreamEnd::NoPublisher));
 }

@@ -3,7 +3,7 @@
 
 #![allow(dead_code)]
 
-use qicp_bridge::{Topics, WaitOptions};
+use qicp_bridge::{ScanSubscriber, SubscriberOptions, Topics, WaitOptions};
 use qicp_core::{BeamGeometry, Pose2, Record, Scan};
 use std::time::Duration;
 
@@ -35,4 +35,19 @@ pub fn quick_wait() -> WaitOptions {
         idle_timeout: Duration::from_secs(10),
         tick: Duration::from_millis(50),
     }
+}
+
+/// A scan subscriber on `topics` that gives up 0.3 s after finding no publisher.
+pub fn impatient_subscriber(topics: &Topics) -> ScanSubscriber {
+    ScanSubscriber::create(
+        topics,
+        &SubscriberOptions {
+            wait: WaitOptions {
+                connect_timeout: Duration::from_millis(300),
+                ..quick_wait()
+            },
+            ..SubscriberOptions::default()
+        },
+    )
+    .expect("subscriber")
 }
