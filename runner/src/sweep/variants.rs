@@ -43,8 +43,10 @@ impl InputVariant {
         }
     }
 
-    /// The records perturbed (the random variants draw from a generator seeded with
-    /// [`SEED`], so the result is always the same).
+    /// The records of a whole log perturbed (the random variants draw from a generator
+    /// seeded with [`SEED`], so the result is always the same). Sweeps stream instead
+    /// ([`InputVariant::stream`]); this is its brute-force twin, which the tests compare it
+    /// with.
     pub fn apply(self, records: &[Record]) -> Result<Vec<Record>> {
         let mut rng = ChaCha8Rng::seed_from_u64(SEED);
         let scans = |f: &mut dyn FnMut(&Scan) -> Result<Scan, ScanError>| {
