@@ -13,16 +13,22 @@
 //!   `qicp match --subscribe`.
 //!
 //! Services: `<prefix>/scan` and `<prefix>/pose` (`--service-prefix`, default `qicp`).
+//!
+//! The publishing driver (pacing, prefetch, connecting) is `qicp_bridge::drive`; this module
+//! parses the flags into its [`DriveOptions`] and wires the commands to it.
 
 use crate::logs::LogError;
 use crate::logs::carmen::{CarmenOptions, CarmenReader};
 use crate::matching::{MatchLoop, Matching, RunWriter, quantile, write_run};
 use anyhow::{Context, Result, bail};
+pub use qicp_bridge::drive::{MAX_SECONDS, RATE_FACTOR_RANGE};
+use qicp_bridge::drive::{secs, topics};
 use qicp_bridge::{
     BackPressure, ConnectError, PoseMessage, PosePublisher, PublisherOptions, ScanHeader,
     ScanPublisher, ScanSubscriber, StreamEnd, StreamEvent, StreamReport, SubscriberOptions, Topics,
     WaitOptions,
 };
+pub use qicp_bridge::{DriveOptions, PublishReport, Rate};
 use qicp_core::Record;
 use qicp_matchers::MatcherConfig;
 use serde::Serialize;
@@ -39,13 +45,6 @@ pub use latency_bench::*;
 pub use park_bench::*;
 pub use subscribe::*;
 
-/// The longest wait any timing option accepts (s): one day. A bound catches `inf`, `1e300` and
-/// a typo, and keeps every wait a valid `Duration`.
-pub const MAX_SECONDS: f64 = 86_400.0;
-
-/// Slowest and fastest `--rate` factor (`0.001x` .. `1000000x`).
-pub const RATE_FACTOR_RANGE: (f64, f64) = (1e-3, 1e6);
-
 /// Parses a timing option (seconds): finite, above 0 and at most [`MAX_SECONDS`]. clap names
 /// the option in its error.
 pub fn parse_seconds(s: &str) -> Result<f64, String> {
@@ -60,51 +59,6 @@ pub fn parse_seconds(s: &str) -> Result<f64, String> {
             "{s} s is out of range: a wait must be finite, above 0 and at most {MAX_SECONDS} s \
              (a day)"
         ))
-    }
-}
-
-/// How fast a recorded or simulated drive is published.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Rate {
-    /// At the pace of the record timestamps.
-    Realtime,
-    /// As fast as the subscribers take them (back-pressure permitting).
-    Max,
-    /// `N` times the pace of the timestamps (`--rate 10x`).
-    Factor(f64),
-}
-
-impl std::str::FromStr for Rate {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "realtime" => Ok(Rate::Realtime),
-            "max" => Ok(Rate::Max),
-            other => {
-                let (slowest, fastest) = RATE_FACTOR_RANGE;
-                other
-                    .strip_suffix('x')
-                    .and_then(|f| f.parse::<f64>().ok())
-                    .filter(|f| (slowest..=fastest).contains(f))
-                    .map(Rate::Factor)
-                    .ok_or_else(|| {
-                        format!(
-                            "bad rate {other:?}: use realtime, max or a factor from {slowest}x \
-                             to {fastest}x, like 10x"
-                        )
-                    })
-            }
-        }
-    }
-}
-
-impl Rate {
-    fn speed(self) -> Option<f64> {
-        match self {
-            Rate::Realtime => Some(1.0),
-            Rate::Max => None,
-            Rate::Factor(f) => Some(f),
-        }
     }
 }
 
@@ -144,234 +98,36 @@ pub struct PublishArgs {
     pub iceoryx2_config: Option<PathBuf>,
 }
 
-/// The topics of `prefix` in the iceoryx2 configuration of `file` (built-in defaults if none).
-fn topics(prefix: &str, file: Option<&Path>) -> Result<Topics> {
-    let topics = Topics::new(prefix);
-    Ok(match file {
-        Some(file) => topics.with_config_file(file)?,
-        None => topics,
-    })
+impl PublishArgs {
+    /// The driver's options of these flags (`--publish` itself is the caller's).
+    pub fn options(&self) -> DriveOptions {
+        DriveOptions {
+            prefix: self.service_prefix.clone(),
+            iceoryx2_config: self.iceoryx2_config.clone(),
+            rate: self.rate,
+            backpressure: self.backpressure,
+            wait_subscribers: self.wait_subscribers,
+            connect_timeout: self.connect_timeout,
+            linger: self.linger,
+            block_timeout: self.block_timeout,
+        }
+    }
 }
 
-/// What a publisher reports at its end (printed as JSON on stdout).
-#[derive(Debug, Clone, Serialize)]
-pub struct PublishReport {
-    /// The scan service.
-    pub service: String,
-    /// Back-pressure mode.
-    pub backpressure: String,
-    /// Scans published.
-    pub published: u64,
-    /// Sends that found a subscriber full and waited (block mode).
-    pub blocked_sends: u64,
-    /// Whether SIGINT/SIGTERM cut the drive short (the end marker is still sent).
-    pub interrupted: bool,
-    /// Whether every subscriber left before the linger timeout.
-    pub subscribers_left: bool,
-    /// Wall time from the first scan to the end marker (s).
-    pub wall_seconds: f64,
-}
-
-/// A wait of `s` seconds; the options are bounded by [`parse_seconds`], and anything else
-/// (negative, NaN, beyond [`MAX_SECONDS`]) is clamped rather than trusted.
-fn secs(s: f64) -> Duration {
-    let s = if s.is_nan() { 0.0 } else { s };
-    Duration::from_secs_f64(s.clamp(0.0, MAX_SECONDS))
-}
-
-/// Records a source may produce ahead of the publisher while it starts (about 1.5 MB of
-/// 181-beam scans).
-const PREFETCH: usize = 1024;
-
-/// Publishes `records` (in time order) on `<prefix>/scan`, then the end-of-stream marker.
-/// No record may have more than `beams` ranges: the shared-memory segment is sized for
-/// that once ([`PublisherOptions::fixed_size`]).
-///
-/// Start-up overlaps with the source: while this thread sets up its iceoryx2 ports and waits
-/// for subscribers, a second thread already pulls records (a simulator computes its first
-/// scans), up to [`PREFETCH`] ahead. Once the subscribers are ready, this thread publishes
-/// that backlog while the source goes on; when it has caught up, the source thread stops and
-/// hands the source back, and this thread pulls the rest itself, so the drive does not pay a
-/// thread hand-off per record. (Paced by `--rate`, it never catches up: the source thread
-/// then runs to the end.) Order, pacing (counted from the first scan sent) and back-pressure
-/// are unchanged.
-pub fn publish_records(
-    records: impl Iterator<Item = Result<Record>> + Send,
+/// Publishes `records` as the flags say ([`qicp_bridge::publish_records`]).
+pub fn publish_records<E>(
+    records: impl Iterator<Item = Result<Record, E>> + Send,
     beams: usize,
     args: &PublishArgs,
-) -> Result<PublishReport> {
-    use std::sync::atomic::{AtomicBool, Ordering};
-    // A bad --iceoryx2-config is refused before the source starts.
-    topics(&args.service_prefix, args.iceoryx2_config.as_deref())?;
-    let stop = AtomicBool::new(false);
-    std::thread::scope(|scope| {
-        let (tx, rx) = std::sync::mpsc::sync_channel(PREFETCH);
-        let stop = &stop;
-        let source = std::thread::Builder::new()
-            .name("qicp-source".to_string())
-            .spawn_scoped(scope, move || {
-                let mut records = records;
-                while !stop.load(Ordering::Acquire) {
-                    let Some(record) = records.next() else { break };
-                    // The publisher gave up (an error, an interrupt): stop producing.
-                    if tx.send(record).is_err() {
-                        break;
-                    }
-                }
-                records
-            })
-            .context("starting the source thread")?;
-        // On an error `rx` is dropped on return: the source stops before the scope joins it.
-        let mut publisher = connect(beams, args)?;
-        let mut drive = Drive::new(args.rate);
-        // Publish the backlog while the source keeps producing (a full subscriber buffer
-        // holds this thread up, not the simulator), until this thread has caught up with it.
-        loop {
-            match rx.try_recv() {
-                Ok(record) => {
-                    if !drive.publish(&mut publisher, record?)? {
-                        break;
-                    }
-                }
-                Err(std::sync::mpsc::TryRecvError::Empty) => break,
-                Err(std::sync::mpsc::TryRecvError::Disconnected) => break,
-            }
-        }
-        stop.store(true, Ordering::Release);
-        // What the source made before it saw `stop` (at most the record in progress); the
-        // loop ends when it has returned.
-        for record in rx {
-            if drive.interrupted || !drive.publish(&mut publisher, record?)? {
-                break;
-            }
-        }
-        let records = source
-            .join()
-            .map_err(|_| anyhow::anyhow!("the record source panicked"))?;
-        if !drive.interrupted {
-            for record in records {
-                if !drive.publish(&mut publisher, record?)? {
-                    break;
-                }
-            }
-        }
-        publisher.end_of_stream()?;
-        let wall_seconds = drive.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
-        let subscribers_left = publisher.linger(secs(args.linger))?;
-        Ok(PublishReport {
-            service: publisher.service().to_string(),
-            backpressure: publisher.backpressure().name().to_string(),
-            published: publisher.sent(),
-            blocked_sends: publisher.blocked_sends(),
-            interrupted: drive.interrupted,
-            subscribers_left,
-            wall_seconds,
-        })
-    })
-}
-
-/// Creates the scan publisher and waits for the subscribers it needs.
-fn connect(beams: usize, args: &PublishArgs) -> Result<ScanPublisher> {
-    let topics = topics(&args.service_prefix, args.iceoryx2_config.as_deref())?;
-    let publisher = ScanPublisher::create(
-        &topics,
-        &PublisherOptions {
-            backpressure: args.backpressure,
-            beams,
-            fixed_size: true,
-            block_timeout: secs(args.block_timeout),
-        },
-    )
-    .map_err(|e| match e {
-        ConnectError::Owned { .. } => anyhow::anyhow!(
-            "{e}; its subscribers would see two streams mixed, so this one does not start"
-        ),
-        e => e.into(),
-    })?;
-    let want = args.wait_subscribers.unwrap_or(match args.backpressure {
-        BackPressure::Block => 1,
-        BackPressure::DropOldest => 0,
-    });
-    if want > 0 {
-        eprintln!("waiting for {want} subscriber(s) on {}", topics.scan());
-        if !publisher.wait_for_subscribers(want, secs(args.connect_timeout))? {
-            if publisher.interrupted() {
-                bail!("interrupted while waiting for subscribers");
-            }
-            bail!(
-                "no subscriber on {} within {} s (--connect-timeout)",
-                topics.scan(),
-                args.connect_timeout
-            );
-        }
-    }
-    Ok(publisher)
-}
-
-/// Pacing of a published drive.
-struct Drive {
-    rate: Rate,
-    started: Option<Instant>,
-    first_timestamp: f64,
-    interrupted: bool,
-}
-
-impl Drive {
-    fn new(rate: Rate) -> Self {
-        Self {
-            rate,
-            started: None,
-            first_timestamp: 0.0,
-            interrupted: false,
-        }
-    }
-
-    /// How long to wait before `record` is due at `speed`; refused (naming the scan) if that is
-    /// not a finite wait of at most [`MAX_SECONDS`], e.g. a log whose time jumps by 1e20 s.
-    fn wait_for(
-        &self,
-        record: &Record,
-        speed: f64,
-        elapsed: Duration,
-        index: u64,
-    ) -> Result<Duration> {
-        let t = record.timestamp();
-        let due = (t - self.first_timestamp) / speed;
-        let wait = due - elapsed.as_secs_f64();
-        if !due.is_finite() || wait > MAX_SECONDS {
-            bail!(
-                "scan {index} (t = {t} s) is due {due} s after the first (t = {} s) at --rate {}: \
-                 a wait beyond {MAX_SECONDS} s; the log's time jumps (publish it with --rate max)",
-                self.first_timestamp,
-                match self.rate {
-                    Rate::Realtime => "realtime".to_string(),
-                    Rate::Max => "max".to_string(),
-                    Rate::Factor(f) => format!("{f}x"),
-                }
-            );
-        }
-        Ok(secs(wait))
-    }
-
-    /// Publishes `record` when it is due; false once SIGINT/SIGTERM arrived (not published).
-    fn publish(&mut self, publisher: &mut ScanPublisher, record: Record) -> Result<bool> {
-        let started = *self.started.get_or_insert_with(|| {
-            self.first_timestamp = record.timestamp();
-            Instant::now()
-        });
-        if let Some(speed) = self.rate.speed() {
-            let wait = self.wait_for(&record, speed, started.elapsed(), publisher.sent())?;
-            if !wait.is_zero() {
-                std::thread::sleep(wait);
-            }
-        }
-        if publisher.interrupted() {
-            self.interrupted = true;
-            return Ok(false);
-        }
-        publisher.publish(&record)?;
-        Ok(true)
-    }
+) -> Result<PublishReport>
+where
+    E: Into<Box<dyn std::error::Error + Send + Sync>>,
+{
+    Ok(qicp_bridge::publish_records(
+        records,
+        beams,
+        &args.options(),
+    )?)
 }
 
 /// Prints a publisher's report on stdout.
@@ -415,7 +171,7 @@ pub fn run_replay(args: ReplayArgs) -> Result<()> {
     // The scan service's slices start at the first scan's size and grow if a later one is
     // longer.
     let beams = first.scan.beams();
-    let records = std::iter::once(Ok(first)).chain(reader.by_ref().map(|r| r.map_err(Into::into)));
+    let records = std::iter::once(Ok(first)).chain(reader.by_ref());
     let report = publish_records(records, beams, &args.bridge)?;
     reader.info.warn(&args.log);
     print_publish_report(&report)

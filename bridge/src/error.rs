@@ -1,4 +1,5 @@
-//! One error enum per operation: connecting (node, services, ports), publishing, receiving.
+//! One error enum per operation: connecting (node, services, ports), publishing, receiving,
+//! publishing a whole drive.
 //!
 //! iceoryx2's own errors are kept as their `Debug` text (`detail`): they are many small enums
 //! per call, and the caller needs the operation and the service that failed, not the type.
@@ -187,6 +188,63 @@ pub enum ReceiveError {
         /// Why it is not a record.
         source: qicp_core::ScanError,
     },
+}
+
+/// Publishing a drive ([`publish_records`](crate::drive::publish_records)): connecting, pacing,
+/// publishing, and the record source's own failures.
+#[derive(Debug, Error)]
+pub enum DriveError {
+    /// The iceoryx2 configuration, the node, the service or the publisher port.
+    #[error(transparent)]
+    Connect(#[from] ConnectError),
+    /// Another publisher owns the scan service ([`ConnectError::Owned`]).
+    #[error("{0}; its subscribers would see two streams mixed, so this one does not start")]
+    Owned(ConnectError),
+    /// Publishing a scan or the end-of-stream marker.
+    #[error(transparent)]
+    Publish(#[from] PublishError),
+    /// Waiting for the subscribers to come or to leave.
+    #[error(transparent)]
+    Receive(#[from] ReceiveError),
+    /// SIGINT/SIGTERM arrived while the publisher waited for its subscribers.
+    #[error("interrupted while waiting for subscribers")]
+    Interrupted,
+    /// Too few subscribers came within the connect timeout.
+    #[error("no subscriber on {service} within {timeout} s (--connect-timeout)")]
+    NoSubscriber {
+        /// The scan service.
+        service: String,
+        /// The connect timeout (s).
+        timeout: f64,
+    },
+    /// At the rate asked for, a scan is due more than
+    /// [`MAX_SECONDS`](crate::drive::MAX_SECONDS) after the first (or at no finite time).
+    #[error(
+        "scan {index} (t = {t} s) is due {due} s after the first (t = {first} s) at --rate \
+         {rate}: a wait beyond {max} s; the log's time jumps (publish it with --rate max)",
+        max = crate::drive::MAX_SECONDS
+    )]
+    TimeJump {
+        /// The scan's index in the drive.
+        index: u64,
+        /// Its timestamp (s).
+        t: f64,
+        /// When it is due after the first scan at this rate (s).
+        due: f64,
+        /// The first scan's timestamp (s).
+        first: f64,
+        /// The rate.
+        rate: crate::drive::Rate,
+    },
+    /// The thread that pulls records ahead of the publisher could not be started.
+    #[error("starting the source thread")]
+    SourceThread(#[source] std::io::Error),
+    /// The thread that pulls records ahead of the publisher panicked.
+    #[error("the record source panicked")]
+    SourcePanicked,
+    /// The record source failed (a malformed log line, a simulation error).
+    #[error(transparent)]
+    Source(Box<dyn std::error::Error + Send + Sync>),
 }
 
 pub(crate) fn detail(e: impl std::fmt::Debug) -> String {

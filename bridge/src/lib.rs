@@ -14,6 +14,8 @@
 //! - [`ScanSubscriber::records`]: the scans as an iterator of owned records ([`Records`]),
 //!   which is a `qicp_io::RecordSource` (by that trait's blanket impl over iterators of
 //!   `Result<Record, E>`), so a matcher reads the bridge as it reads a log or the simulator;
+//! - [`drive`]: the publishing driver ([`publish_records`]): a drive published at a pace
+//!   ([`Rate`]), its start-up overlapped with the source's, reported in a [`PublishReport`];
 //! - [`sequence`]: the sequence-number bookkeeping that makes every loss visible;
 //! - [`payload`]: opaque byte payloads of any size, written and read in place (what
 //!   `qicp bench bridge --sizes` measures against a Unix-domain socket);
@@ -27,12 +29,14 @@
 //! side is [`ScanHeader::to_record`], because [`qicp_core::Scan`] owns its ranges.
 #![warn(missing_docs)]
 
+pub mod drive;
 pub mod error;
 pub mod messages;
 pub mod sequence;
 mod transport;
 
-pub use error::{ConnectError, PublishError, ReceiveError};
+pub use drive::{DriveOptions, PublishReport, Rate, publish_records};
+pub use error::{ConnectError, DriveError, PublishError, ReceiveError};
 pub use messages::{LAYOUT_VERSION, PoseC, PoseMessage, ScanHeader, publisher_identity};
 pub use sequence::{Admission, SequenceTracker, StreamEnd, StreamReport};
 pub use transport::payload;
