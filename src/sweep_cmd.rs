@@ -37,6 +37,10 @@ pub struct SweepArgs {
     /// Skip and count malformed log lines instead of failing.
     #[arg(long)]
     pub lenient: bool,
+    /// Also write each run's trajectory to DIR/<run>.tum (e.g. default.tum, scans-2.tum), to
+    /// see where a variant goes wrong (`qicp eval relations DIR/scans-2.tum RELATIONS`).
+    #[arg(long, value_name = "DIR")]
+    pub trajectories: Option<PathBuf>,
 }
 
 /// Runs the command.
@@ -48,7 +52,10 @@ pub fn run(args: SweepArgs) -> Result<()> {
         Some(names) => select_variants(all, names)?,
         None => all,
     };
-    let input = SweepInput::load(&args.log, &args.relations, args.scans, args.lenient)?;
+    let mut input = SweepInput::load(&args.log, &args.relations, args.scans, args.lenient)?;
+    if let Some(dir) = &args.trajectories {
+        input = input.with_trajectories(dir)?;
+    }
     let jobs = args
         .jobs
         .or_else(|| std::thread::available_parallelism().ok())

@@ -263,3 +263,51 @@ fn sweep_bounds_hold_on_the_first_3000_intel_scans() {
         assert!(f(&report["median_ratio"]) <= 1.3, "{kind}: {report}");
     }
 }
+
+#[test]
+fn sweep_writes_each_runs_trajectory_which_scores_as_reported() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("runs");
+    let out_arg = out.to_str().expect("utf-8 path");
+    let (report, _) = sweep_json(&[
+        "--scans",
+        "400",
+        "--variants",
+        "beams/2,icp.max_dist_end*0.7",
+        "--trajectories",
+        out_arg,
+    ]);
+    let relations = data("intel.relations");
+    for (file, figures) in [
+        ("default.tum", &report["default"]),
+        ("beams-2.tum", &report["variants"][0]),
+        ("icp.max_dist_end-x0.7.tum", &report["variants"][1]),
+    ] {
+        let path = out.join(file);
+        let lines = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .lines()
+            .count();
+        assert_eq!(
+            lines as f64,
+            f(&figures["scans"]),
+            "{file}: one pose per scan"
+        );
+        let o = qicp(&[
+            "eval",
+            "relations",
+            path.to_str().expect("utf-8 path"),
+            &relations,
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let scored: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+        let (a, b) = (f(&scored["trans_mean"]), f(&figures["trans_mean"]));
+        assert!((a - b).abs() < 1e-12, "{file}: scored {a}, reported {b}");
+    }
+    let names: Vec<_> = std::fs::read_dir(&out)
+        .expect("listed")
+        .map(|e| e.expect("entry").file_name())
+        .collect();
+    assert_eq!(names.len(), 3, "no temporary file is left: {names:?}");
+}

@@ -244,6 +244,8 @@ pub struct SweepInput {
     pub scans: usize,
     /// The relations every run is scored with.
     pub relations: Vec<Relation>,
+    /// Where each run writes its trajectory (see [`SweepInput::with_trajectories`]).
+    trajectories: Option<PathBuf>,
 }
 
 impl SweepInput {
@@ -307,7 +309,32 @@ impl SweepInput {
             options,
             scans: count,
             relations,
+            trajectories: None,
         })
+    }
+
+    /// Makes every run write its trajectory to `dir/<run>.tum` (TUM format; the run's name
+    /// with `/` and `*` spelt `-` and `-x`, e.g. `scans-2.tum`, `icp.max_dist_end-x0.7.tum`), so
+    /// that a variant that fails can be compared with the default pose by pose. The directory
+    /// is created now, before any matching; each file appears under its name only when its run
+    /// is complete.
+    pub fn with_trajectories(mut self, dir: &Path) -> Result<Self> {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating the trajectories directory {}", dir.display()))?;
+        // A directory that cannot take files is refused now, not after the first run.
+        tempfile::NamedTempFile::new_in(dir)
+            .with_context(|| format!("writing into {}", dir.display()))?;
+        self.trajectories = Some(dir.to_path_buf());
+        Ok(self)
+    }
+
+    /// The file run `name` writes its trajectory to, if trajectories are kept.
+    #[must_use]
+    pub fn trajectory_path(&self, name: &str) -> Option<PathBuf> {
+        let file = name.replace(['/', '\\'], "-").replace('*', "-x");
+        self.trajectories
+            .as_ref()
+            .map(|dir| dir.join(format!("{file}.tum")))
     }
 
     /// The records the runs use, read afresh from the log, one at a time.

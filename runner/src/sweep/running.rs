@@ -1,6 +1,7 @@
 //! Runs in parallel over the cores, one variant at a time per core.
 
 use super::*;
+use qicp_io::tum::write_tum_pose;
 
 /// The figures of one run.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -83,8 +84,21 @@ impl Job {
 
     /// Matches the (perturbed) records of `input`, read afresh from its log, and scores the
     /// trajectory with its relations.
+    /// With [`SweepInput::with_trajectories`] the run also writes its trajectory.
     pub fn run(&self, input: &SweepInput) -> Result<RunFigures> {
-        self.run_on(input.records()?, &input.relations)
+        let Some(path) = input.trajectory_path(&self.name) else {
+            return self.run_on(input.records()?, &input.relations);
+        };
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let file = tempfile::NamedTempFile::new_in(dir)
+            .with_context(|| format!("writing into {}", dir.display()))?;
+        let mut out = std::io::BufWriter::new(file);
+        let figures = self.run_writing(input.records()?, &input.relations, Some(&mut out))?;
+        out.into_inner()
+            .map_err(|e| e.into_error())
+            .and_then(|f| f.persist(&path).map_err(|e| e.error))
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(figures)
     }
 
     /// Matches `records` (in time order, perturbed as the job says, one at a time) and scores
@@ -94,6 +108,16 @@ impl Job {
         &self,
         records: impl Iterator<Item = Result<Record>>,
         relations: &[Relation],
+    ) -> Result<RunFigures> {
+        self.run_writing(records, relations, None)
+    }
+
+    /// [`Job::run_on`], writing every pose to `trajectory` (TUM lines) as it is estimated.
+    pub fn run_writing(
+        &self,
+        records: impl Iterator<Item = Result<Record>>,
+        relations: &[Relation],
+        mut trajectory: Option<&mut dyn std::io::Write>,
     ) -> Result<RunFigures> {
         let config = match &self.config {
             Ok(c) => c,
@@ -109,6 +133,10 @@ impl Job {
             let record = record?;
             let (estimate, _) = matcher.push(&record);
             probe.push(record.timestamp(), estimate.pose)?;
+            if let Some(w) = trajectory.as_mut() {
+                write_tum_pose(w, record.timestamp(), &estimate.pose)
+                    .context("writing the trajectory")?;
+            }
         }
         let summary = matcher.summary();
         let trajectory = probe.trajectory();
