@@ -220,6 +220,22 @@ fn variants_follow_the_steering_parameters() {
 }
 
 #[test]
+fn the_old_name_of_the_laser_noise_variant_still_selects_it() {
+    let all = all_variants(&MatcherConfig::defaults(qicp_matchers::MatcherKind::QWsm));
+    let names = ["wsm.sigma_range*0.7".to_string()];
+    let picked = select_variants(all.clone(), &names).expect("the old name is known");
+    let picked: Vec<&str> = picked.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(picked, ["laser.sigma_range*0.7"]);
+    assert_eq!(current_name("wsm.sigma_slide*0.7"), "wsm.sigma_slide*0.7");
+    assert_eq!(
+        current_name("wsm.sigma_range"),
+        "wsm.sigma_range",
+        "no factor, no rename"
+    );
+    assert!(select_variants(all, &["wsm.sigma_range*0.5".to_string()]).is_err());
+}
+
+#[test]
 fn parallel_results_are_in_item_order_and_panics_are_errors() {
     let items: Vec<u32> = (0..20).collect();
     for jobs in [1, 3, 64] {

@@ -207,15 +207,36 @@ pub fn all_variants(config: &MatcherConfig) -> Vec<Variant> {
     inputs.chain(parameters).collect()
 }
 
+/// Parameters whose variants were named after another section once: `(old, new)`. The laser
+/// noise was WSM's own parameter (`[matcher.wsm] sigma_range`, still read from old configs)
+/// before it became the sensor's (`[matcher.laser]`).
+pub const RENAMED_PARAMETERS: &[(&str, &str)] = &[
+    ("wsm.sigma_range", "laser.sigma_range"),
+    ("wsm.sigma_bearing", "laser.sigma_bearing"),
+];
+
+/// The current name of a variant given by an old name (see [`RENAMED_PARAMETERS`]), e.g.
+/// `wsm.sigma_range*0.7` → `laser.sigma_range*0.7`; other names as they are.
+#[must_use]
+pub fn current_name(name: &str) -> String {
+    for (old, new) in RENAMED_PARAMETERS {
+        if let Some(factor) = name.strip_prefix(old).filter(|f| f.starts_with('*')) {
+            return format!("{new}{factor}");
+        }
+    }
+    name.to_string()
+}
+
 /// The variants named in `names` (in report order, each once); `default` is accepted and
 /// ignored, since the default run always happens. An unknown name is an error listing the
 /// known ones.
 pub fn select_variants(all: Vec<Variant>, names: &[String]) -> Result<Vec<Variant>> {
-    let names: Vec<&str> = names
+    let names: Vec<String> = names
         .iter()
-        .map(|n| n.trim())
-        .filter(|n| !n.is_empty() && *n != "default")
+        .map(|n| current_name(n.trim()))
+        .filter(|n| !n.is_empty() && n != "default")
         .collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
     let unknown: Vec<&str> = names
         .iter()
         .copied()
