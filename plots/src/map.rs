@@ -170,119 +170,260 @@ pub fn occupancy_map(
             why: "no scans",
         });
     }
-    register_fonts();
     let (lo, hi) = map_bounds(lasers, scans, truth.unwrap_or(&[]));
-    let mut grid = OccupancyGrid::new(lo, hi, MAP_CELL_M);
+    let mut canvas = MapCanvas::new(lo, hi);
     for (laser, scan) in lasers.iter().zip(scans) {
-        grid.insert_scan(laser, scan);
+        canvas.insert_scan(laser, scan);
     }
-    // Pixels per cell side.
-    let zoom = (MAP_PIXELS / grid.width.max(grid.height) as f64).min(MAP_MAX_ZOOM);
-    let plot_w = ((grid.width as f64 * zoom).ceil() as u32).max(1);
-    let plot_h = ((grid.height as f64 * zoom).ceil() as u32).max(1);
-    let m_per_px = MAP_CELL_M / zoom;
-    // The cells under pixel column (or row) k: [k/zoom, (k+1)/zoom), at least one.
-    let cells = |k: u32| {
-        let a = (f64::from(k) / zoom).floor() as usize;
-        let b = ((f64::from(k + 1) / zoom).floor() as usize).max(a + 1);
-        (a, b)
-    };
-    let (x0, y0) = grid.origin;
-    let (x1, y1) = (
-        x0 + f64::from(plot_w) * m_per_px,
-        y0 + f64::from(plot_h) * m_per_px,
-    );
+    canvas.draw(out, title, path, truth)
+}
 
-    // The frame around the plotting area has a fixed size: measure it once, then size the
-    // picture so that the plotting area is exactly plot_w × plot_h (1:1 aspect).
-    let (fw, fh) = {
-        let (tw, th) = (2000u32, 2000u32);
-        let mut buf = vec![0u8; (tw * th * 3) as usize];
-        let root = BitMapBackend::with_buffer(&mut buf, (tw, th)).into_drawing_area();
-        let chart = tri!(out, map_chart(&root, title, (x0, x1), (y0, y1)));
-        let (pw, ph) = chart.plotting_area().dim_in_pixel();
-        (tw - pw, th - ph)
-    };
-    let size = (plot_w + fw, plot_h + fh);
-    let root = BitMapBackend::new(out, size).into_drawing_area();
-    tri!(out, root.fill(&WHITE));
-    let mut chart = tri!(out, map_chart(&root, title, (x0, x1), (y0, y1)));
-    {
-        let area = chart.plotting_area().strip_coord_spec();
-        let (pw, ph) = area.dim_in_pixel();
-        for py in 0..ph.min(plot_h) {
-            // Pixel rows go down, grid rows up.
-            let (cy0, cy1) = cells(plot_h - 1 - py);
-            for px in 0..pw.min(plot_w) {
-                let (cx0, cx1) = cells(px);
-                let c = grid.shade(cx0, cx1, cy0, cy1);
-                tri!(out, area.draw_pixel((px as i32, py as i32), &c));
+/// The bounds of a map gathered scan by scan, for scans that are not held in memory: the
+/// returns' coordinates are counted in 1 cm bins (memory grows with the area seen, not with
+/// the number of scans), so [`MapExtent::bounds`] gives [`map_bounds`]' trimmed quantiles to
+/// within a bin, widened outwards.
+#[derive(Debug, Clone, Default)]
+pub struct MapExtent {
+    xs: std::collections::BTreeMap<i64, u64>,
+    ys: std::collections::BTreeMap<i64, u64>,
+    n: u64,
+    lo: (f64, f64),
+    hi: (f64, f64),
+    poses: bool,
+}
+
+/// Bin width of [`MapExtent`] (m).
+const EXTENT_BIN_M: f64 = 0.01;
+
+impl MapExtent {
+    /// An empty extent.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds the returns of `scan` taken from `laser` and the laser pose itself.
+    pub fn add_scan(&mut self, laser: &Pose2, scan: &Scan) {
+        for p in scan.points() {
+            let q = *laser * *p;
+            if q.x.is_finite() && q.y.is_finite() {
+                *self
+                    .xs
+                    .entry((q.x / EXTENT_BIN_M).floor() as i64)
+                    .or_insert(0) += 1;
+                *self
+                    .ys
+                    .entry((q.y / EXTENT_BIN_M).floor() as i64)
+                    .or_insert(0) += 1;
+                self.n += 1;
             }
         }
+        self.add_pose(laser);
     }
-    tri!(
-        out,
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("x (m)")
-            .y_desc("y (m)")
-            .x_label_formatter(&|v| tick(*v))
-            .y_label_formatter(&|v| tick(*v))
-            .label_style((FONT, 16))
-            .axis_desc_style((FONT, 18))
-            .draw()
-    );
-    for (label, color) in [
-        ("hit (5 cm cells)", RGBColor(0, 0, 0)),
-        ("seen free", WHITE),
-        ("never seen", RGBColor(205, 205, 205)),
-    ] {
-        tri!(
-            out,
-            chart.draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())
-        )
-        .label(label)
-        .legend(move |(x, y)| {
-            EmptyElement::at((x, y))
-                + Rectangle::new([(4, -7), (18, 7)], color.filled())
-                + Rectangle::new([(4, -7), (18, 7)], BLACK.stroke_width(1))
-        });
+
+    /// Adds a pose that must lie inside the map (a laser or a true pose).
+    pub fn add_pose(&mut self, p: &Pose2) {
+        if !self.poses {
+            self.lo = (f64::INFINITY, f64::INFINITY);
+            self.hi = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+            self.poses = true;
+        }
+        self.lo = (self.lo.0.min(p.x), self.lo.1.min(p.y));
+        self.hi = (self.hi.0.max(p.x), self.hi.1.max(p.y));
     }
-    if let Some(truth) = truth {
-        let style = RGBColor(150, 150, 150).stroke_width(5);
-        draw_path(out, &mut chart, truth, style)?;
-        legend_entry(out, &mut chart, "true path", style)?;
+
+    /// `[lo, hi]` as [`map_bounds`] gives them: the 0.1 % and 99.9 % quantiles of the returns
+    /// (here the outer edge of their bin) and every pose, with a 2 m margin.
+    #[must_use]
+    pub fn bounds(&self) -> ((f64, f64), (f64, f64)) {
+        // The value of rank `rank` (1-based) of the counted bins: its bin's lower edge, or
+        // upper edge for `upper`.
+        let at = |bins: &std::collections::BTreeMap<i64, u64>, rank: u64, upper: bool| {
+            let mut seen = 0;
+            for (&bin, &count) in bins {
+                seen += count;
+                if seen >= rank {
+                    return (bin + i64::from(upper)) as f64 * EXTENT_BIN_M;
+                }
+            }
+            f64::NAN
+        };
+        let (mut lo, mut hi) = if self.n == 0 {
+            (
+                (f64::INFINITY, f64::INFINITY),
+                (f64::NEG_INFINITY, f64::NEG_INFINITY),
+            )
+        } else {
+            let rank = |q: f64| ((q * self.n as f64).ceil() as u64).clamp(1, self.n);
+            let (r_lo, r_hi) = (rank(0.001), rank(0.999));
+            (
+                (at(&self.xs, r_lo, false), at(&self.ys, r_lo, false)),
+                (at(&self.xs, r_hi, true), at(&self.ys, r_hi, true)),
+            )
+        };
+        if self.poses {
+            lo = (lo.0.min(self.lo.0), lo.1.min(self.lo.1));
+            hi = (hi.0.max(self.hi.0), hi.1.max(self.hi.1));
+        }
+        ((lo.0 - 2.0, lo.1 - 2.0), (hi.0 + 2.0, hi.1 + 2.0))
     }
-    let style = PALETTE[1].stroke_width(2);
-    draw_path(out, &mut chart, path, style)?;
-    legend_entry(out, &mut chart, "estimated path", style)?;
-    if let Some(start) = path.first() {
-        tri!(
-            out,
-            chart.draw_series(std::iter::once(Circle::new(
-                (start.x, start.y),
-                6,
-                PALETTE[0].filled()
-            )))
-        )
-        .label("start")
-        .legend(|(x, y)| Circle::new((x + 12, y), 5, PALETTE[0].filled()));
+}
+
+/// A map being drawn: the occupancy grid over fixed bounds, filled one scan at a time (so
+/// the scans need not be held), then drawn with the paths by [`MapCanvas::draw`].
+#[derive(Debug, Clone)]
+pub struct MapCanvas {
+    grid: OccupancyGrid,
+    zoom: f64,
+    plot: (u32, u32),
+    x: (f64, f64),
+    y: (f64, f64),
+    /// Returns in each legend corner: upper right, upper left, lower right, lower left.
+    corners: [usize; 4],
+}
+
+impl MapCanvas {
+    /// An empty map over `[lo, hi]` (m), e.g. [`MapExtent::bounds`].
+    #[must_use]
+    pub fn new(lo: (f64, f64), hi: (f64, f64)) -> Self {
+        let grid = OccupancyGrid::new(lo, hi, MAP_CELL_M);
+        // Pixels per cell side.
+        let zoom = (MAP_PIXELS / grid.width.max(grid.height) as f64).min(MAP_MAX_ZOOM);
+        let plot_w = ((grid.width as f64 * zoom).ceil() as u32).max(1);
+        let plot_h = ((grid.height as f64 * zoom).ceil() as u32).max(1);
+        let m_per_px = MAP_CELL_M / zoom;
+        let (x0, y0) = grid.origin;
+        let (x1, y1) = (
+            x0 + f64::from(plot_w) * m_per_px,
+            y0 + f64::from(plot_h) * m_per_px,
+        );
+        Self {
+            grid,
+            zoom,
+            plot: (plot_w, plot_h),
+            x: (x0, x1),
+            y: (y0, y1),
+            corners: [0; 4],
+        }
     }
-    // Where the legend hides the fewest returns and path.
-    let returns = lasers.iter().zip(scans).flat_map(|(l, s)| {
-        s.points().iter().map(move |p| {
-            let q = *l * *p;
+
+    /// Adds one scan taken from `laser` (the laser's pose in the world).
+    pub fn insert_scan(&mut self, laser: &Pose2, scan: &Scan) {
+        self.grid.insert_scan(laser, scan);
+        let returns = scan.points().iter().map(|p| {
+            let q = *laser * *p;
             (q.x, q.y)
-        })
-    });
-    let corner = emptiest_corner(
-        returns.chain(path.iter().map(|p| (p.x, p.y))),
-        (x0, x1),
-        (y0, y1),
-    );
-    finish_with_legend(out, &root, &mut chart, corner)?;
-    Ok(grid.occupied_cells())
+        });
+        count_corners(&mut self.corners, returns, self.x, self.y);
+    }
+
+    /// Draws the map into `out` with the estimated robot path `path` and, when known, the
+    /// true path. Returns the number of occupied cells.
+    pub fn draw(
+        mut self,
+        out: &Path,
+        title: &str,
+        path: &[Pose2],
+        truth: Option<&[Pose2]>,
+    ) -> Result<usize, PlotError> {
+        register_fonts();
+        let grid = &self.grid;
+        let zoom = self.zoom;
+        let (plot_w, plot_h) = self.plot;
+        // The cells under pixel column (or row) k: [k/zoom, (k+1)/zoom), at least one.
+        let cells = |k: u32| {
+            let a = (f64::from(k) / zoom).floor() as usize;
+            let b = ((f64::from(k + 1) / zoom).floor() as usize).max(a + 1);
+            (a, b)
+        };
+        let ((x0, x1), (y0, y1)) = (self.x, self.y);
+        // The frame around the plotting area has a fixed size: measure it once, then size the
+        // picture so that the plotting area is exactly plot_w × plot_h (1:1 aspect).
+        let (fw, fh) = {
+            let (tw, th) = (2000u32, 2000u32);
+            let mut buf = vec![0u8; (tw * th * 3) as usize];
+            let root = BitMapBackend::with_buffer(&mut buf, (tw, th)).into_drawing_area();
+            let chart = tri!(out, map_chart(&root, title, (x0, x1), (y0, y1)));
+            let (pw, ph) = chart.plotting_area().dim_in_pixel();
+            (tw - pw, th - ph)
+        };
+        let size = (plot_w + fw, plot_h + fh);
+        let root = BitMapBackend::new(out, size).into_drawing_area();
+        tri!(out, root.fill(&WHITE));
+        let mut chart = tri!(out, map_chart(&root, title, (x0, x1), (y0, y1)));
+        {
+            let area = chart.plotting_area().strip_coord_spec();
+            let (pw, ph) = area.dim_in_pixel();
+            for py in 0..ph.min(plot_h) {
+                // Pixel rows go down, grid rows up.
+                let (cy0, cy1) = cells(plot_h - 1 - py);
+                for px in 0..pw.min(plot_w) {
+                    let (cx0, cx1) = cells(px);
+                    let c = grid.shade(cx0, cx1, cy0, cy1);
+                    tri!(out, area.draw_pixel((px as i32, py as i32), &c));
+                }
+            }
+        }
+        tri!(
+            out,
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc("x (m)")
+                .y_desc("y (m)")
+                .x_label_formatter(&|v| tick(*v))
+                .y_label_formatter(&|v| tick(*v))
+                .label_style((FONT, 16))
+                .axis_desc_style((FONT, 18))
+                .draw()
+        );
+        for (label, color) in [
+            ("hit (5 cm cells)", RGBColor(0, 0, 0)),
+            ("seen free", WHITE),
+            ("never seen", RGBColor(205, 205, 205)),
+        ] {
+            tri!(
+                out,
+                chart.draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())
+            )
+            .label(label)
+            .legend(move |(x, y)| {
+                EmptyElement::at((x, y))
+                    + Rectangle::new([(4, -7), (18, 7)], color.filled())
+                    + Rectangle::new([(4, -7), (18, 7)], BLACK.stroke_width(1))
+            });
+        }
+        if let Some(truth) = truth {
+            let style = RGBColor(150, 150, 150).stroke_width(5);
+            draw_path(out, &mut chart, truth, style)?;
+            legend_entry(out, &mut chart, "true path", style)?;
+        }
+        let style = PALETTE[1].stroke_width(2);
+        draw_path(out, &mut chart, path, style)?;
+        legend_entry(out, &mut chart, "estimated path", style)?;
+        if let Some(start) = path.first() {
+            tri!(
+                out,
+                chart.draw_series(std::iter::once(Circle::new(
+                    (start.x, start.y),
+                    6,
+                    PALETTE[0].filled()
+                )))
+            )
+            .label("start")
+            .legend(|(x, y)| Circle::new((x + 12, y), 5, PALETTE[0].filled()));
+        }
+        // Where the legend hides the fewest returns and path.
+        count_corners(
+            &mut self.corners,
+            path.iter().map(|p| (p.x, p.y)),
+            (x0, x1),
+            (y0, y1),
+        );
+        let corner = corner_of(&self.corners);
+        finish_with_legend(out, &root, &mut chart, corner)?;
+        Ok(self.grid.occupied_cells())
+    }
 }
 
 type MapChart<'a, 'b> =
@@ -307,11 +448,23 @@ pub(super) fn map_chart<'a, 'b>(
 /// of the height) holds the fewest of `points`: where the legend hides the least.
 pub(super) fn emptiest_corner(
     points: impl Iterator<Item = (f64, f64)>,
+    x: (f64, f64),
+    y: (f64, f64),
+) -> SeriesLabelPosition {
+    let mut counts = [0usize; 4];
+    count_corners(&mut counts, points, x, y);
+    corner_of(&counts)
+}
+
+/// Adds to `counts` (upper right, upper left, lower right, lower left) the `points` in each
+/// legend-sized corner box of `[x0, x1] × [y0, y1]`.
+fn count_corners(
+    counts: &mut [usize; 4],
+    points: impl Iterator<Item = (f64, f64)>,
     (x0, x1): (f64, f64),
     (y0, y1): (f64, f64),
-) -> SeriesLabelPosition {
+) {
     let (w, h) = ((x1 - x0) / 4.0, (y1 - y0) / 3.0);
-    let mut counts = [0usize; 4]; // upper right, upper left, lower right, lower left
     for (x, y) in points {
         let right = x > x1 - w;
         let left = x < x0 + w;
@@ -322,6 +475,10 @@ pub(super) fn emptiest_corner(
         counts[2] += usize::from(lower && right);
         counts[3] += usize::from(lower && left);
     }
+}
+
+/// The corner of [`count_corners`]' counts holding the fewest points (the first of equals).
+fn corner_of(counts: &[usize; 4]) -> SeriesLabelPosition {
     let best = (0..4).min_by_key(|&k| counts[k]).unwrap_or(0);
     [
         SeriesLabelPosition::UpperRight,
