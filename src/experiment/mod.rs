@@ -41,7 +41,7 @@
 //! judged by. (The corridor's layout is fixed; there only the noise changes.)
 
 use crate::eval::{AteOptions, AteReport, RelationsReport, evaluate_ate, evaluate_relations};
-use crate::logs::carmen::{CarmenOptions, read_carmen};
+use crate::logs::carmen::CarmenOptions;
 use crate::logs::relations::{Relation, read_relations};
 use crate::logs::tum::{Stamped, write_tum};
 use crate::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_run};
@@ -58,6 +58,7 @@ use std::time::Instant;
 mod config;
 mod pictures;
 mod source;
+mod stream;
 mod worlds;
 
 pub use config::*;
@@ -102,29 +103,41 @@ pub struct RunArgs {
 /// Runs every matcher of `config` on `source`, `jobs` at a time (each matcher on one thread,
 /// taking the next from the list as it finishes), and writes each one's outputs under `out`.
 /// The outcomes come back in the list's order; each matcher is deterministic, so they are the
-/// same for any `jobs`.
+/// same for any `jobs`. On a log source each matcher streams the log itself (and, with
+/// `pictures`, gathers its map picture's bounds), so memory holds `jobs` maps, not the log.
 fn run_matchers(
     config: &ExperimentConfig,
     source: &Source,
     out: &Path,
     jobs: usize,
     show_progress: bool,
+    pictures: bool,
 ) -> Result<Vec<MatcherOutcome>> {
     let kinds = &config.run.matchers;
     let one = |kind: &String, progress: bool| -> Result<MatcherOutcome> {
         let t = Instant::now();
         let matcher = config.matcher(kind)?;
-        let run = run_matcher(&source.records, &matcher, progress)?;
-        write_run(&out.join(kind), &run, &matcher)?;
+        let dir = out.join(kind);
+        let Records::Held(records) = &source.records else {
+            return stream::run_streamed(source, &matcher, &dir, progress, pictures);
+        };
+        let run = run_matcher(records, &matcher, progress)?;
+        write_run(&dir, &run, &matcher)?;
         let scores =
             Scores::of(&run.trajectory, source).with_context(|| format!("scoring {kind}"))?;
+        let mut per_scan = PerScan::default();
+        for row in &run.rows {
+            per_scan.push(row);
+        }
         Ok(MatcherOutcome {
             config: matcher,
-            trajectory: run.trajectory,
-            rows: run.rows,
+            trajectory: Some(run.trajectory),
+            trajectory_file: dir.join("trajectory.tum"),
+            per_scan,
             summary: run.summary,
             scores,
             seconds: t.elapsed().as_secs_f64(),
+            extent: None,
         })
     };
     let jobs = jobs.clamp(1, kinds.len().max(1));
@@ -144,7 +157,7 @@ fn run_matchers(
                     if show_progress {
                         match &result {
                             Ok(o) => {
-                                eprintln!("{kind}: {} scans in {:.1} s", o.rows.len(), o.seconds)
+                                eprintln!("{kind}: {} scans in {:.1} s", o.summary.scans, o.seconds)
                             }
                             Err(e) => eprintln!("{kind}: failed: {e:#}"),
                         }
@@ -219,25 +232,30 @@ fn run_once(
 
     let t = Instant::now();
     let source = Source::load(&config.source)?;
+    let odometry_path = out.join("odometry.tum");
+    let odometry_scores = match source.odometry() {
+        Some(odometry) => {
+            write_trajectory(&odometry_path, &odometry)?;
+            Scores::of(&odometry, &source)?
+        }
+        None => stream::odometry_pass(&source, &odometry_path)?,
+    };
     let source_seconds = t.elapsed().as_secs_f64();
-    let odometry = source.odometry();
-    write_trajectory(&out.join("odometry.tum"), &odometry)?;
     if let Some(truth) = &source.truth {
         write_trajectory(&out.join("groundtruth.tum"), truth)?;
     }
-    let odometry_scores = Scores::of(&odometry, &source)?;
 
     let t = Instant::now();
     let jobs = args
         .jobs
         .or_else(|| std::thread::available_parallelism().ok())
         .map_or(1, std::num::NonZeroUsize::get);
-    let outcomes = run_matchers(config, &source, out, jobs, !args.quiet)?;
+    let outcomes = run_matchers(config, &source, out, jobs, !args.quiet, pictures)?;
     let matching_seconds = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let pictures = if pictures {
-        draw_pictures(out, &source, &odometry, &outcomes)?
+        draw_pictures(out, &source, &outcomes)?
     } else {
         json!({})
     };
@@ -252,7 +270,7 @@ fn run_once(
     let summary = json!({
         "source": source.name,
         "config": args.config.display().to_string(),
-        "scans": source.records.len(),
+        "scans": source.scans(),
         "ground_truth": source.truth.is_some(),
         "matchers": matchers,
         "odometry": odo,

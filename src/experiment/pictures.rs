@@ -21,65 +21,142 @@ pub(super) fn aligned(traj: &[Stamped], truth: Option<&[Stamped]>) -> Vec<Pose2>
     traj.iter().map(|(_, p)| to_truth * *p).collect()
 }
 
-/// Draws every picture; returns `{file: what it shows}`.
+/// A matcher's trajectory: the held one, or read back from its file.
+fn trajectory_of(o: &MatcherOutcome) -> Result<std::borrow::Cow<'_, [Stamped]>> {
+    Ok(match &o.trajectory {
+        Some(t) => std::borrow::Cow::Borrowed(t.as_slice()),
+        None => std::borrow::Cow::Owned(
+            crate::logs::tum::read_tum(&o.trajectory_file)
+                .with_context(|| format!("reading {}", o.trajectory_file.display()))?,
+        ),
+    })
+}
+
+/// Draws the map of `o` for a log source: the log read afresh, every scan at the matcher's
+/// poses (read back from its trajectory file) into a grid over the bounds gathered while
+/// matching. Memory holds the grid and the path, not the scans.
+fn streamed_map(
+    file: &Path,
+    title: &str,
+    source: &Source,
+    o: &MatcherOutcome,
+    truth_poses: Option<&[Pose2]>,
+) -> Result<usize> {
+    let extent = o
+        .extent
+        .as_ref()
+        .with_context(|| format!("{}: no map bounds were gathered", o.kind()))?;
+    let (lo, hi) = extent.bounds();
+    let poses = aligned(&trajectory_of(o)?, source.truth.as_deref());
+    let mut canvas = plots::MapCanvas::new(lo, hi);
+    let mut k = 0;
+    source.each_record(|r| {
+        let pose = poses.get(k).with_context(|| {
+            format!(
+                "{} holds {} poses, fewer than the log's scans",
+                o.trajectory_file.display(),
+                poses.len()
+            )
+        })?;
+        canvas.insert_scan(&(*pose * r.laser_offset), &r.scan);
+        k += 1;
+        Ok(())
+    })?;
+    Ok(canvas.draw(file, title, &poses, truth_poses)?)
+}
+
+/// The maps of a held drive, drawn in parallel from the records in memory.
+fn held_maps(
+    out: &Path,
+    records: &[Record],
+    truth: Option<&[Stamped]>,
+    truth_poses: Option<&[Pose2]>,
+    outcomes: &[MatcherOutcome],
+) -> Vec<(String, Result<usize>)> {
+    let scans: Vec<&qicp_core::Scan> = records.iter().map(|r| &r.scan).collect();
+    std::thread::scope(|s| {
+        let handles: Vec<_> = outcomes
+            .iter()
+            .map(|o| {
+                let scans = &scans;
+                s.spawn(move || {
+                    let file = format!("map_{}.png", o.kind());
+                    let title = format!("{}: every scan at its estimated pose", o.kind());
+                    let r = (|| -> Result<usize> {
+                        let poses = aligned(&trajectory_of(o)?, truth);
+                        let lasers: Vec<Pose2> = poses
+                            .iter()
+                            .zip(records)
+                            .map(|(p, r)| *p * r.laser_offset)
+                            .collect();
+                        Ok(plots::occupancy_map(
+                            &out.join(&file),
+                            &title,
+                            &lasers,
+                            scans,
+                            &poses,
+                            truth_poses,
+                        )?)
+                    })();
+                    (file, r)
+                })
+            })
+            .collect();
+        joined(handles)
+    })
+}
+
+/// The results of the map threads; a panicked thread gives an error.
+fn joined(
+    handles: Vec<std::thread::ScopedJoinHandle<'_, (String, Result<usize>)>>,
+) -> Vec<(String, Result<usize>)> {
+    handles
+        .into_iter()
+        .map(|h| {
+            h.join().unwrap_or_else(|_| {
+                (
+                    "map".into(),
+                    Err(anyhow::anyhow!("drawing a map: its thread panicked")),
+                )
+            })
+        })
+        .collect()
+}
+
+/// Draws every picture; returns `{file: what it shows}`. A simulated drive's records are held
+/// and drawn from memory; a log is read afresh for each matcher's map, and the paths are read
+/// back from `odometry.tum` and each `trajectory.tum` (a picture of paths holds them while it
+/// is drawn, 24 bytes a scan each).
 pub(super) fn draw_pictures(
     out: &Path,
     source: &Source,
-    odometry: &[Stamped],
     outcomes: &[MatcherOutcome],
 ) -> Result<Value> {
     let mut pictures = Map::new();
     let truth = source.truth.as_deref();
     let truth_poses: Option<Vec<Pose2>> = truth.map(|t| t.iter().map(|p| p.1).collect());
-    let scans: Vec<&qicp_core::Scan> = source.records.iter().map(|r| &r.scan).collect();
     let aligned_note = if truth.is_some() {
         ", start aligned with the truth"
     } else {
         ""
     };
 
-    // Maps (paper Figs. 3, 5): one per matcher, drawn in parallel (each is independent).
-    let maps: Vec<(String, Result<usize, plots::PlotError>)> = std::thread::scope(|s| {
-        let handles: Vec<_> = outcomes
+    // Maps (paper Figs. 3, 5): one per matcher; a held drive's are drawn in parallel (each is
+    // independent).
+    let maps: Vec<(String, Result<usize>)> = match &source.records {
+        Records::Held(records) => held_maps(out, records, truth, truth_poses.as_deref(), outcomes),
+        // One at a time: each holds a grid, a picture and its path while it is drawn, and
+        // reads the log afresh.
+        Records::Log { .. } => outcomes
             .iter()
             .map(|o| {
-                let (scans, truth_poses) = (&scans, &truth_poses);
-                s.spawn(move || {
-                    let poses = aligned(&o.trajectory, truth);
-                    let lasers: Vec<Pose2> = poses
-                        .iter()
-                        .zip(&source.records)
-                        .map(|(p, r)| *p * r.laser_offset)
-                        .collect();
-                    let file = format!("map_{}.png", o.kind());
-                    let title = format!("{}: every scan at its estimated pose", o.kind());
-                    let r = plots::occupancy_map(
-                        &out.join(&file),
-                        &title,
-                        &lasers,
-                        scans,
-                        &poses,
-                        truth_poses.as_deref(),
-                    );
-                    (file, r)
-                })
+                let file = format!("map_{}.png", o.kind());
+                let title = format!("{}: every scan at its estimated pose", o.kind());
+                let r = streamed_map(&out.join(&file), &title, source, o, truth_poses.as_deref());
+                (file, r)
             })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| {
-                h.join().unwrap_or_else(|_| {
-                    (
-                        "map".into(),
-                        Err(plots::PlotError::Empty {
-                            path: "map".into(),
-                            why: "drawing thread panicked",
-                        }),
-                    )
-                })
-            })
-            .collect()
-    });
+            .collect(),
+    };
     for (file, r) in maps {
         r?;
         pictures.insert(
@@ -91,9 +168,17 @@ pub(super) fn draw_pictures(
     // Trajectories.
     let aligned_all: Vec<Vec<Pose2>> = outcomes
         .iter()
-        .map(|o| aligned(&o.trajectory, truth))
-        .collect();
-    let odo = aligned(odometry, truth);
+        .map(|o| Ok(aligned(&trajectory_of(o)?, truth)))
+        .collect::<Result<_>>()?;
+    let odo = match source.odometry() {
+        Some(odometry) => aligned(&odometry, truth),
+        None => {
+            let path = out.join("odometry.tum");
+            let odometry = crate::logs::tum::read_tum(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            aligned(&odometry, truth)
+        }
+    };
     let mut series = Vec::new();
     if let Some(t) = &truth_poses {
         series.push(PathSeries {
@@ -121,7 +206,7 @@ pub(super) fn draw_pictures(
             dashed: o.config.reference == ReferenceKind::Map && o.config.index() != "quadtree",
         });
     }
-    let title = format!("Robot paths, {} scans{aligned_note}", source.records.len());
+    let title = format!("Robot paths, {} scans{aligned_note}", source.scans());
     plots::trajectories(&out.join("trajectories.png"), &title, &series)?;
     pictures.insert(
         "trajectories.png".into(),
@@ -159,12 +244,12 @@ pub(super) fn draw_pictures(
                 series: vec![
                     ScanSeries {
                         label: i.kind(),
-                        values: i.rows.iter().map(|r| r.residual_mm).collect(),
+                        values: i.per_scan.residual_mm.clone(),
                         color: inc_color,
                     },
                     ScanSeries {
                         label: b.kind(),
-                        values: b.rows.iter().map(|r| r.residual_mm).collect(),
+                        values: b.per_scan.residual_mm.clone(),
                         color: boost_color,
                     },
                 ],
@@ -185,10 +270,11 @@ pub(super) fn draw_pictures(
                 series: vec![ScanSeries {
                     label: format!("{} / {}", b.kind(), i.kind()),
                     values: b
-                        .rows
+                        .per_scan
+                        .certainty
                         .iter()
-                        .zip(&i.rows)
-                        .map(|(rb, ri)| rb.certainty / ri.certainty)
+                        .zip(&i.per_scan.certainty)
+                        .map(|(cb, ci)| cb / ci)
                         .collect(),
                     color: boost_color,
                 }],

@@ -5,66 +5,95 @@ use super::*;
 /// The records of an experiment, with whatever scores them.
 #[derive(Debug)]
 pub struct Source {
-    /// What the records are (`sim:<path>` or `log:<path>`).
+    /// What the records are (`sim:<path>`, `log:<path>` or `bag:<path>`).
     pub name: String,
-    /// Laser records in time order.
-    pub records: Vec<Record>,
+    /// Laser records in time order: held, or read afresh from the log for each pass.
+    pub records: Records,
     /// True robot poses, where known.
     pub truth: Option<Vec<Stamped>>,
     /// Freiburg relations, where given.
     pub relations: Option<Vec<Relation>>,
 }
 
+/// Where an experiment's records come from.
+#[derive(Debug)]
+pub enum Records {
+    /// A simulated drive, held whole (it is short, and holds its ground truth).
+    Held(Vec<Record>),
+    /// A log (CARMEN, plain or bz2, or a ROS 2 bag), streamed from the file for every pass so
+    /// that memory does not grow with its length.
+    Log {
+        /// The log file.
+        path: PathBuf,
+        /// How to read it.
+        options: Box<crate::logs::LogOptions>,
+        /// Records the experiment uses (the first ones).
+        scans: usize,
+    },
+}
+
 impl Source {
-    /// Simulates the drive or reads the log the config names.
+    /// Simulates the drive, or reads the log once: to count the records the run uses (the first
+    /// `max_scans`), check that it has some, and take the true poses a log may carry. A log's
+    /// records are not kept; every matcher reads them afresh ([`Source::each_record`]).
     pub fn load(c: &SourceConfig) -> Result<Self> {
-        let (name, mut records, mut truth) = if let Some(sim) = &c.sim {
+        let (name, records, truth) = if let Some(sim) = &c.sim {
             let cfg = c.drive(sim)?;
-            let (records, _, _) = qicp_sim::Simulation::run(cfg)
+            let (mut records, _, _) = qicp_sim::Simulation::run(cfg)
                 .with_context(|| format!("simulating {}", sim.display()))?;
-            (format!("sim:{}", sim.display()), records, None)
-        } else if let Some(log) = c.log.as_ref().filter(|l| crate::logs::rosbag::is_mcap(l)) {
-            // A bag streams; only the scans the run uses are kept.
-            let mut reader = crate::logs::LogReader::open(log, &c.log_options())?;
-            let records = reader
-                .by_ref()
-                .take(c.max_scans.unwrap_or(usize::MAX))
-                .collect::<Result<Vec<_>, _>>()
-                .with_context(|| format!("reading {}", log.display()))?;
-            reader.warn(log);
-            (format!("bag:{}", log.display()), records, c.truth()?)
-        } else if let Some(log) = &c.log {
-            let opts = CarmenOptions {
-                lenient: c.lenient,
-                ..CarmenOptions::default()
-            };
-            let read =
-                read_carmen(log, &opts).with_context(|| format!("reading {}", log.display()))?;
-            if read.info.skipped_lines > 0 {
-                eprintln!(
-                    "warning: skipped {} malformed lines of {}",
-                    read.info.skipped_lines,
-                    log.display()
-                );
+            if let Some(n) = c.max_scans {
+                records.truncate(n);
             }
-            (format!("log:{}", log.display()), read.records, c.truth()?)
-        } else {
-            anyhow::bail!("`source`: give `sim` or `log`");
-        };
-        if let Some(n) = c.max_scans {
-            records.truncate(n);
-        }
-        if records.is_empty() {
-            anyhow::bail!("{name}: no laser records");
-        }
-        if truth.is_none() && records.iter().all(|r| r.truth.is_some()) {
-            truth = Some(
+            let name = format!("sim:{}", sim.display());
+            if records.is_empty() {
+                anyhow::bail!("{name}: no laser records");
+            }
+            let truth = records.iter().all(|r| r.truth.is_some()).then(|| {
                 records
                     .iter()
                     .filter_map(|r| r.truth.map(|t| (r.timestamp(), t)))
-                    .collect(),
-            );
-        }
+                    .collect()
+            });
+            (name, Records::Held(records), truth)
+        } else if let Some(log) = &c.log {
+            let prefix = if crate::logs::rosbag::is_mcap(log) {
+                "bag"
+            } else {
+                "log"
+            };
+            let name = format!("{prefix}:{}", log.display());
+            let options = c.log_options();
+            let mut reader = crate::logs::LogReader::open(log, &options)
+                .with_context(|| format!("reading {}", log.display()))?;
+            // The true poses the records carry: kept only while every record has one.
+            let mut carried: Option<Vec<Stamped>> = Some(Vec::new());
+            let mut scans = 0;
+            for record in reader.by_ref().take(c.max_scans.unwrap_or(usize::MAX)) {
+                let record = record.with_context(|| format!("reading {}", log.display()))?;
+                carried = carried.and_then(|mut t| {
+                    let pose = record.truth?;
+                    t.push((record.timestamp(), pose));
+                    Some(t)
+                });
+                scans += 1;
+            }
+            reader.warn(log);
+            if scans == 0 {
+                anyhow::bail!("{name}: no laser records");
+            }
+            let truth = match c.truth()? {
+                Some(t) => Some(t),
+                None => carried,
+            };
+            let records = Records::Log {
+                path: log.clone(),
+                options: Box::new(options),
+                scans,
+            };
+            (name, records, truth)
+        } else {
+            anyhow::bail!("`source`: give `sim` or `log`");
+        };
         let relations = match &c.relations {
             Some(p) => Some(read_relations(p).with_context(|| format!("reading {}", p.display()))?),
             None => None,
@@ -77,13 +106,49 @@ impl Source {
         })
     }
 
-    /// Raw odometry at the laser times.
+    /// Records the experiment uses.
     #[must_use]
-    pub fn odometry(&self) -> Vec<Stamped> {
-        self.records
-            .iter()
-            .map(|r| (r.timestamp(), r.odometry))
-            .collect()
+    pub fn scans(&self) -> usize {
+        match &self.records {
+            Records::Held(r) => r.len(),
+            Records::Log { scans, .. } => *scans,
+        }
+    }
+
+    /// Calls `f` on every record in time order: the held ones, or the log's read afresh one
+    /// at a time. Stops at the first error (of the log or of `f`).
+    pub fn each_record(&self, mut f: impl FnMut(&Record) -> Result<()>) -> Result<()> {
+        match &self.records {
+            Records::Held(records) => records.iter().try_for_each(f),
+            Records::Log {
+                path,
+                options,
+                scans,
+            } => {
+                let reader = crate::logs::LogReader::open(path, options)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                for record in reader.take(*scans) {
+                    let record = record.with_context(|| format!("reading {}", path.display()))?;
+                    f(&record)?;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// Raw odometry at the laser times of held records (none for a log: see
+    /// [`stream::odometry_pass`](super::stream::odometry_pass)).
+    #[must_use]
+    pub fn odometry(&self) -> Option<Vec<Stamped>> {
+        match &self.records {
+            Records::Held(records) => Some(
+                records
+                    .iter()
+                    .map(|r| (r.timestamp(), r.odometry))
+                    .collect(),
+            ),
+            Records::Log { .. } => None,
+        }
     }
 }
 
@@ -101,12 +166,28 @@ pub struct Scores {
 impl Scores {
     /// Scores `traj` with whatever the source has.
     pub fn of(traj: &[Stamped], source: &Source) -> Result<Self> {
+        Self::of_parts(Some(traj), Some(traj), source)
+    }
+
+    /// Scores a trajectory from its parts: `whole` against the truth (required when the source
+    /// has truth) and `near_relations` (at least the poses nearest the relations' times, as
+    /// a [`RelationProbe`](crate::eval::RelationProbe) picks them) against the relations
+    /// (required when it has relations).
+    pub fn of_parts(
+        whole: Option<&[Stamped]>,
+        near_relations: Option<&[Stamped]>,
+        source: &Source,
+    ) -> Result<Self> {
         let ate = match &source.truth {
-            Some(truth) => Some(evaluate_ate(traj, truth, &AteOptions::default())?),
+            Some(truth) => {
+                let traj = whole.context("the whole trajectory is needed for ATE")?;
+                Some(evaluate_ate(traj, truth, &AteOptions::default())?)
+            }
             None => None,
         };
         let relations = match &source.relations {
             Some(rel) => {
+                let traj = near_relations.context("no poses for the relations")?;
                 let r = evaluate_relations(traj, rel, crate::eval::DEFAULT_MAX_DT)?;
                 if r.n == 0 {
                     eprintln!(
@@ -141,16 +222,54 @@ impl Scores {
 pub struct MatcherOutcome {
     /// The effective configuration.
     pub config: MatcherConfig,
-    /// Robot pose per record.
-    pub trajectory: Vec<Stamped>,
-    /// Per-scan figures.
-    pub rows: Vec<ScanRow>,
+    /// Robot pose per record, held when the records are (a simulated drive) or when there is
+    /// truth to score it against (the truth is held all the same); otherwise the poses are in
+    /// `trajectory.tum` only.
+    pub trajectory: Option<Vec<Stamped>>,
+    /// Where the trajectory was written.
+    pub trajectory_file: PathBuf,
+    /// Per-scan values the ratios and the per-scan figures need.
+    pub per_scan: PerScan,
     /// Totals.
     pub summary: MatchSummary,
     /// Scores.
     pub scores: Scores,
     /// Wall time of the whole run (s), matching and bookkeeping.
     pub seconds: f64,
+    /// Bounds of the matcher's map picture, gathered while matching (log sources, when
+    /// pictures are drawn).
+    pub extent: Option<plots::MapExtent>,
+}
+
+/// The two per-scan values an experiment keeps of every matcher, in full precision
+/// (`matches.csv` rounds them): 16 bytes per scan, for the boosted / incremental ratios
+/// (their median needs every scan's) and the paper's Fig. 4 panels.
+#[derive(Debug, Clone, Default)]
+pub struct PerScan {
+    /// Residual correlation distance (mm); NaN for a fallback.
+    pub residual_mm: Vec<f64>,
+    /// Matching certainty (m²); NaN for a fallback.
+    pub certainty: Vec<f64>,
+}
+
+impl PerScan {
+    /// Adds one scan's row.
+    pub fn push(&mut self, row: &ScanRow) {
+        self.residual_mm.push(row.residual_mm);
+        self.certainty.push(row.certainty);
+    }
+
+    /// Scans held.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.certainty.len()
+    }
+
+    /// Whether no scan is held.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.certainty.is_empty()
+    }
 }
 
 impl MatcherOutcome {
@@ -231,10 +350,11 @@ pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> Value {
         // Per scan (paper Fig. 4c-d): the mean is at the mercy of a few near-degenerate
         // incremental matches, the median is not.
         let per_scan: Vec<f64> = b
-            .rows
+            .per_scan
+            .certainty
             .iter()
-            .zip(&i.rows)
-            .map(|(rb, ri)| rb.certainty / ri.certainty)
+            .zip(&i.per_scan.certainty)
+            .map(|(cb, ci)| cb / ci)
             .filter(|r| r.is_finite())
             .collect();
         let mean = per_scan.iter().sum::<f64>() / per_scan.len() as f64;

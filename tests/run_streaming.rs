@@ -1,0 +1,200 @@
+//! `qicp run` on a log source streams the log through every matcher: what it writes is what
+//! `qicp match` writes for the same matcher on the same scans, and it does not depend on how
+//! many matchers run at once.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn qicp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(args)
+        .output()
+        .expect("qicp runs")
+}
+
+fn assert_success(o: &Output, what: &str) {
+    assert!(
+        o.status.success(),
+        "{what} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+fn data(file: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/intel")
+        .join(file)
+}
+
+fn lines(path: &Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).expect("JSON")
+}
+
+/// `matches.csv` without its wall-time column.
+fn rows_without_times(path: &Path) -> Vec<String> {
+    let rows = lines(path);
+    let ms = rows[0]
+        .split(',')
+        .position(|h| h == "ms")
+        .expect("an ms column");
+    rows.iter()
+        .map(|r| {
+            r.split(',')
+                .enumerate()
+                .filter(|(i, _)| *i != ms)
+                .map(|(_, v)| v)
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect()
+}
+
+/// Writes an experiment on `log` (its first `scans`) with the Intel relations.
+fn experiment(dir: &Path, log: &Path, scans: usize, matchers: &[&str]) -> PathBuf {
+    let config = dir.join("experiment.toml");
+    let kinds: Vec<String> = matchers.iter().map(|k| format!("{k:?}")).collect();
+    std::fs::write(
+        &config,
+        format!(
+            "[source]\nlog = {log:?}\nrelations = {:?}\nmax_scans = {scans}\n\n[run]\nmatchers = [{}]\n",
+            data("intel.relations"),
+            kinds.join(", ")
+        ),
+    )
+    .expect("config");
+    config
+}
+
+fn run(config: &Path, out: &Path, jobs: &str) {
+    let o = qicp(&[
+        "run",
+        config.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--jobs",
+        jobs,
+        "--quiet",
+    ]);
+    assert_success(&o, "qicp run");
+}
+
+/// The first 500 Intel scans as a ROS 2 bag: `qicp match` has no scan limit, and the shared
+/// log is read, never copied.
+fn first_scans_as_bag(dir: &Path, scans: usize) -> PathBuf {
+    let bag = dir.join("intel-first.mcap");
+    let o = qicp(&[
+        "convert",
+        data("intel.clf.bz2").to_str().expect("utf-8"),
+        bag.to_str().expect("utf-8"),
+        "--max-records",
+        &scans.to_string(),
+    ]);
+    assert_success(&o, "qicp convert");
+    bag
+}
+
+#[test]
+fn a_log_experiment_writes_what_match_writes_for_any_jobs() {
+    const SCANS: usize = 500;
+    let kinds = ["wsm", "q-wsm"];
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bag = first_scans_as_bag(dir.path(), SCANS);
+    let config = experiment(dir.path(), &bag, SCANS, &kinds);
+    let (one, two) = (dir.path().join("one"), dir.path().join("two"));
+    run(&config, &one, "1");
+    run(&config, &two, "2");
+    let summary = json(&one.join("summary.json"));
+    assert_eq!(summary["scans"], SCANS);
+    assert_eq!(lines(&one.join("odometry.tum")).len(), SCANS);
+    for kind in kinds {
+        let matched = dir.path().join(format!("match-{kind}"));
+        let o = qicp(&[
+            "match",
+            bag.to_str().expect("utf-8"),
+            "--matcher",
+            kind,
+            "--out",
+            matched.to_str().expect("utf-8"),
+            "--relations",
+            data("intel.relations").to_str().expect("utf-8"),
+        ]);
+        assert_success(&o, "qicp match");
+        let trajectory = lines(&one.join(kind).join("trajectory.tum"));
+        assert_eq!(trajectory.len(), SCANS, "{kind}");
+        assert_eq!(
+            trajectory,
+            lines(&matched.join("trajectory.tum")),
+            "{kind}: qicp run and qicp match differ"
+        );
+        assert_eq!(
+            trajectory,
+            lines(&two.join(kind).join("trajectory.tum")),
+            "{kind}: --jobs 1 and --jobs 2 differ"
+        );
+        let rows = rows_without_times(&one.join(kind).join("matches.csv"));
+        assert_eq!(
+            rows,
+            rows_without_times(&matched.join("matches.csv")),
+            "{kind}"
+        );
+        assert_eq!(
+            rows,
+            rows_without_times(&two.join(kind).join("matches.csv")),
+            "{kind}"
+        );
+        // The relations, scored from the poses streamed past, as `qicp match` scores them.
+        let run_relations = &summary["matchers"][kind]["relations"];
+        let match_relations = &json(&matched.join("summary.json"))["relations"];
+        assert!(run_relations["n"].as_u64().is_some_and(|n| n > 0), "{kind}");
+        assert_eq!(run_relations, match_relations, "{kind}");
+        assert_eq!(
+            summary["matchers"][kind]["map_points"],
+            json(&matched.join("summary.json"))["map_points"],
+            "{kind}"
+        );
+    }
+    for picture in [
+        "map_wsm.png",
+        "map_q-wsm.png",
+        "trajectories.png",
+        "certainty.png",
+    ] {
+        assert!(one.join(picture).is_file(), "{picture}");
+    }
+}
+
+/// A CARMEN log streams too: the first scans of the experiment are the first poses of
+/// `qicp match` over the whole log (matching is causal).
+#[test]
+fn a_carmen_experiment_starts_as_match_over_the_whole_log() {
+    const SCANS: usize = 500;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = experiment(dir.path(), &data("intel.clf.bz2"), SCANS, &["wsm"]);
+    let out = dir.path().join("run");
+    run(&config, &out, "2");
+    let matched = dir.path().join("match");
+    let o = qicp(&[
+        "match",
+        data("intel.clf.bz2").to_str().expect("utf-8"),
+        "--matcher",
+        "wsm",
+        "--out",
+        matched.to_str().expect("utf-8"),
+    ]);
+    assert_success(&o, "qicp match");
+    let trajectory = lines(&out.join("wsm/trajectory.tum"));
+    assert_eq!(trajectory.len(), SCANS);
+    assert_eq!(
+        trajectory[..],
+        lines(&matched.join("trajectory.tum"))[..SCANS]
+    );
+}
