@@ -395,16 +395,12 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             self.validator.record(fit);
             check.inlier_share = fit.share;
             check.refused = self.validator.refuse(fit, level);
-            // A match still poor after the search, by its share or by its residual, gives way
-            // where the prediction explains the scan at least as well: the match went astray
-            // (a residual far above the level with the share intact is a match off by a few
-            // centimetres or a degree), and neither the map nor the next prediction may start
-            // from it.
-            if is_poor(fit, level)
+            if check.refused
                 && self.validator.inlier_share(&self.reference, local, &guess) >= fit.share
             {
+                // The prediction explains the scan at least as well: the match went astray,
+                // and the next prediction must not start from it.
                 result = MatchResult::fallback(guess, Fallback::Refused);
-                check.refused = true;
             }
         }
         (result, check)

@@ -11,13 +11,10 @@
 //! 2. a suspect match is searched again: a correlative search over a window around the
 //!    prediction ([`crate::correlative`]) gives ICP a new start, and the better of the two
 //!    results is kept;
-//! 3. a match whose share is still below the level does not enter the map; a match still
-//!    poor by its share or by its residual gives way where the prediction explains the scan
-//!    at least as well: the prediction is reported instead (a
-//!    [`Fallback::Refused`](qicp_core::Fallback::Refused)), so neither the map nor the next
-//!    prediction starts from a match that went astray. (A residual far above the level with
-//!    the share intact is a match off by centimetres or a degree; where the prediction
-//!    explains less, people walking by or an open door raised it, and the match stands.)
+//! 3. a match still below the level does not enter the map; where the prediction explains
+//!    the scan at least as well, the prediction is reported instead (a
+//!    [`Fallback::Refused`](qicp_core::Fallback::Refused)), so the next prediction does not
+//!    start from a match that went astray.
 
 use crate::ConfigError;
 use crate::icp::positive;
@@ -132,9 +129,9 @@ pub struct Check {
     pub searched: bool,
     /// The search's start led to a better match, which replaced the first.
     pub recovered: bool,
-    /// The match stayed below the running level: its share did, or it stayed poor and the
-    /// prediction explains the scan at least as well, which then stands. It does not enter a
-    /// map (a scan-to-scan reference is replaced all the same).
+    /// The match stayed below the running level: it does not enter a map (a scan-to-scan
+    /// reference is replaced all the same), and where the prediction explains the scan at
+    /// least as well, the prediction stands.
     pub refused: bool,
     /// The match disagreed with odometry beyond the motion model's uncertainty
     /// ([`ValidationParams::max_odometry_chi2`]): its pose is reported, but it does not
@@ -273,9 +270,8 @@ impl Validator {
     /// refused. The `max_refusals`-th refusal in a row clears the history, so the scene the
     /// robot has entered sets the next level.
     pub fn refuse(&mut self, fit: Fit, level: Option<Level>) -> bool {
-        // A residual above the level alone makes a match suspect, not refused: people walking
-        // by, a door left open raise the residual of right matches too (the pipeline still
-        // prefers the prediction where it explains the scan at least as well).
+        // A residual above the level makes a match suspect, not refused: people walking by, a
+        // door left open raise the residual of right matches too.
         let refused = level.is_some_and(|l| fit.share < l.min_share);
         self.refusals = if refused { self.refusals + 1 } else { 0 };
         if self.refusals >= self.params.max_refusals {
