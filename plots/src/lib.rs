@@ -95,10 +95,12 @@ macro_rules! tri {
 }
 
 // The pictures, after the macro they use (macros are in scope from their definition on).
+mod extent;
 mod map;
 mod paths;
 mod per_scan;
 
+pub use extent::*;
 pub use map::*;
 pub use paths::*;
 pub use per_scan::*;
