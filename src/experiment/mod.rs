@@ -39,6 +39,11 @@
 //! printed table give the median, minimum and maximum of every figure over the worlds. One
 //! layout or one noise draw can be lucky or unlucky; the medians are what a method should be
 //! judged by. (The corridor's layout is fixed; there only the noise changes.)
+//!
+//! A simulated drive is short and held in memory. A log is not: it is read once to count its
+//! scans, once for raw odometry, once by every matcher as it matches (`stream`) and once more
+//! for each matcher's map picture, so memory holds the matchers' maps, not the log (see
+//! `stream` for the little that grows with the scans).
 
 use crate::eval::{AteOptions, AteReport, RelationsReport, evaluate_ate, evaluate_relations};
 use crate::logs::carmen::CarmenOptions;
