@@ -184,8 +184,13 @@ impl BagReader<std::io::BufReader<std::fs::File>> {
     }
 }
 
-/// Whether a file is MCAP (by its magic bytes).
+/// Whether a file is MCAP (by its magic bytes). Only a regular file is looked into: reading
+/// the magic of a pipe (`/dev/stdin`, `<(bzcat log)`) would take its first bytes from the log
+/// that follows, so a pipe is never a bag and is read as a CARMEN log, whole.
 pub fn is_mcap(path: &Path) -> bool {
+    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return false;
+    }
     let mut magic = [0u8; 8];
     std::fs::File::open(path)
         .and_then(|mut f| f.read_exact(&mut magic))
