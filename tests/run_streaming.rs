@@ -198,3 +198,77 @@ fn a_carmen_experiment_starts_as_match_over_the_whole_log() {
         lines(&matched.join("trajectory.tum"))[..SCANS]
     );
 }
+
+#[test]
+fn a_log_on_a_pipe_is_read_once_and_matched_as_the_same_file() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut text = String::new();
+    for i in 0..60 {
+        // A robot creeping along a corridor 2 m wide, walls at ±1 m.
+        let ranges: Vec<String> = (0..181)
+            .map(|b| {
+                let a = (b as f64 - 90.0).to_radians();
+                let r = if a.sin().abs() > 1e-6 {
+                    1.0 / a.sin().abs()
+                } else {
+                    50.0
+                };
+                format!("{:.3}", r.min(50.0))
+            })
+            .collect();
+        let (x, t) = (i as f64 * 0.05, i as f64 * 0.2);
+        text.push_str(&format!(
+            "FLASER 181 {} {x} 0 0 {x} 0 0 {t} host {t}\n",
+            ranges.join(" ")
+        ));
+    }
+    let file = dir.path().join("corridor.clf");
+    std::fs::write(&file, &text).expect("log written");
+    let config = dir.path().join("run.toml");
+    std::fs::write(
+        &config,
+        "[source]\nlog = \"unused.clf\"\n\n[run]\nmatchers = [\"wsm\", \"q-wsm\"]\n",
+    )
+    .expect("config written");
+    let out = |name: &str| dir.path().join(name);
+    let o = qicp(&[
+        "run",
+        config.to_str().expect("utf-8"),
+        "--log",
+        file.to_str().expect("utf-8"),
+        "--out",
+        out("file").to_str().expect("utf-8"),
+        "--quiet",
+    ]);
+    assert_success(&o, "run on the file");
+    // The same bytes through a pipe, which can be read only once.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args([
+            "run",
+            config.to_str().expect("utf-8"),
+            "--log",
+            "/dev/stdin",
+            "--out",
+            out("pipe").to_str().expect("utf-8"),
+            "--quiet",
+        ])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("qicp runs");
+    let mut stdin = child.stdin.take().expect("stdin");
+    stdin.write_all(text.as_bytes()).expect("piped");
+    drop(stdin);
+    let o = child.wait_with_output().expect("qicp ends");
+    assert_success(&o, "run on a pipe");
+    for kind in ["wsm", "q-wsm"] {
+        let (a, b) = (
+            lines(&out("file").join(kind).join("trajectory.tum")),
+            lines(&out("pipe").join(kind).join("trajectory.tum")),
+        );
+        assert_eq!(a.len(), 60, "{kind}: one pose a scan");
+        assert_eq!(a, b, "{kind}: the pipe gives the file's trajectory");
+    }
+}

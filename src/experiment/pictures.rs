@@ -47,6 +47,9 @@ fn streamed_map(
         .as_ref()
         .with_context(|| format!("{}: no map bounds were gathered", o.kind()))?;
     let (lo, hi) = extent.bounds();
+    if !(lo.0.is_finite() && lo.1.is_finite() && hi.0.is_finite() && hi.1.is_finite()) {
+        anyhow::bail!("{}: no scan or pose to draw a map of", o.kind());
+    }
     let poses = aligned(&trajectory_of(o)?, source.truth.as_deref());
     let mut canvas = plots::MapCanvas::new(lo, hi);
     let mut k = 0;

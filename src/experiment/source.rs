@@ -29,7 +29,21 @@ pub enum Records {
         options: Box<crate::logs::LogOptions>,
         /// Records the experiment uses (the first ones).
         scans: usize,
+        /// The file's length and modification time when it was counted: every pass checks
+        /// them, so that a log replaced or cut during a run is an error, not a run over two
+        /// different logs.
+        identity: FileIdentity,
     },
+}
+
+/// What identifies a log file between passes: its length and modification time.
+pub type FileIdentity = (u64, Option<std::time::SystemTime>);
+
+/// The [`FileIdentity`] of `path`, or `None` when it is not a regular file (a pipe, a
+/// device), which can be read only once.
+fn file_identity(path: &Path) -> Result<Option<FileIdentity>> {
+    let m = std::fs::metadata(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(m.is_file().then(|| (m.len(), m.modified().ok())))
 }
 
 impl Source {
@@ -63,6 +77,10 @@ impl Source {
             };
             let name = format!("{prefix}:{}", log.display());
             let options = c.log_options();
+            // A pipe or a device can be read only once: its records are held, as a
+            // simulated drive's are.
+            let identity = file_identity(log)?;
+            let mut held = Vec::new();
             let mut reader = crate::logs::LogReader::open(log, &options)
                 .with_context(|| format!("reading {}", log.display()))?;
             // The true poses the records carry: kept only while every record has one.
@@ -76,6 +94,9 @@ impl Source {
                     Some(t)
                 });
                 scans += 1;
+                if identity.is_none() {
+                    held.push(record);
+                }
             }
             reader.warn(log);
             if scans == 0 {
@@ -85,10 +106,14 @@ impl Source {
                 Some(t) => Some(t),
                 None => carried,
             };
-            let records = Records::Log {
-                path: log.clone(),
-                options: Box::new(options),
-                scans,
+            let records = match identity {
+                Some(identity) => Records::Log {
+                    path: log.clone(),
+                    options: Box::new(options),
+                    scans,
+                    identity,
+                },
+                None => Records::Held(held),
             };
             (name, records, truth)
         } else {
@@ -124,12 +149,27 @@ impl Source {
                 path,
                 options,
                 scans,
+                identity,
             } => {
+                let changed = || {
+                    anyhow::anyhow!(
+                        "{} changed during the run (it held {scans} records when counted);                          every matcher reads the log afresh, so it must stay as it is",
+                        path.display()
+                    )
+                };
+                if file_identity(path)?.as_ref() != Some(identity) {
+                    return Err(changed());
+                }
                 let reader = crate::logs::LogReader::open(path, options)
                     .with_context(|| format!("reading {}", path.display()))?;
+                let mut read = 0;
                 for record in reader.take(*scans) {
                     let record = record.with_context(|| format!("reading {}", path.display()))?;
                     f(&record)?;
+                    read += 1;
+                }
+                if read != *scans || file_identity(path)?.as_ref() != Some(identity) {
+                    return Err(changed());
                 }
                 Ok(())
             }
@@ -366,4 +406,46 @@ pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> Value {
         out.insert(format!("{}/{}", b.kind(), inc), Value::Object(m));
     }
     Value::Object(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A CARMEN log of `n` scans of a robot creeping along a wall.
+    fn log(n: usize) -> String {
+        (0..n)
+            .map(|i| {
+                let ranges = vec!["2.0"; 181].join(" ");
+                let (x, t) = (i as f64 * 0.01, i as f64 * 0.1);
+                format!("FLASER 181 {ranges} {x} 0 0 {x} 0 0 {t} host {t}\n")
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_log_that_changes_between_passes_is_an_error_not_a_second_log() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("drive.clf");
+        std::fs::write(&path, log(20)).expect("written");
+        let source = Source::load(&SourceConfig {
+            log: Some(path.clone()),
+            ..SourceConfig::default()
+        })
+        .expect("loads");
+        assert_eq!(source.scans(), 20);
+        let count = |s: &Source| {
+            let mut n = 0;
+            s.each_record(|_| {
+                n += 1;
+                Ok(())
+            })
+            .map(|()| n)
+        };
+        assert_eq!(count(&source).expect("the same log"), 20);
+        // Cut short (a truncated copy, a log rewritten by its recorder).
+        std::fs::write(&path, log(12)).expect("rewritten");
+        let err = count(&source).expect_err("changed").to_string();
+        assert!(err.contains("changed during the run"), "{err}");
+    }
 }
