@@ -232,7 +232,12 @@ fn the_old_name_of_the_laser_noise_variant_still_selects_it() {
         "wsm.sigma_range",
         "no factor, no rename"
     );
-    assert!(select_variants(all, &["wsm.sigma_range*0.5".to_string()]).is_err());
+    let err = select_variants(all, &["wsm.sigma_range*0.5".to_string()]).expect_err("no 0.5");
+    assert!(
+        err.to_string()
+            .contains("unknown variant wsm.sigma_range*0.5;"),
+        "named as given: {err}"
+    );
 }
 
 #[test]

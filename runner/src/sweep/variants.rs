@@ -210,10 +210,7 @@ pub fn all_variants(config: &MatcherConfig) -> Vec<Variant> {
 /// Parameters whose variants were named after another section once: `(old, new)`. The laser
 /// noise was WSM's own parameter (`[matcher.wsm] sigma_range`, still read from old configs)
 /// before it became the sensor's (`[matcher.laser]`).
-pub const RENAMED_PARAMETERS: &[(&str, &str)] = &[
-    ("wsm.sigma_range", "laser.sigma_range"),
-    ("wsm.sigma_bearing", "laser.sigma_bearing"),
-];
+pub const RENAMED_PARAMETERS: &[(&str, &str)] = &[("wsm.sigma_range", "laser.sigma_range")];
 
 /// The current name of a variant given by an old name (see [`RENAMED_PARAMETERS`]), e.g.
 /// `wsm.sigma_range*0.7` → `laser.sigma_range*0.7`; other names as they are.
@@ -231,16 +228,18 @@ pub fn current_name(name: &str) -> String {
 /// ignored, since the default run always happens. An unknown name is an error listing the
 /// known ones.
 pub fn select_variants(all: Vec<Variant>, names: &[String]) -> Result<Vec<Variant>> {
-    let names: Vec<String> = names
+    // (as given, current name)
+    let given: Vec<(&str, String)> = names
         .iter()
-        .map(|n| current_name(n.trim()))
-        .filter(|n| !n.is_empty() && n != "default")
+        .map(|n| (n.trim(), current_name(n.trim())))
+        .filter(|(n, _)| !n.is_empty() && *n != "default")
         .collect();
-    let names: Vec<&str> = names.iter().map(String::as_str).collect();
-    let unknown: Vec<&str> = names
+    let names: Vec<&str> = given.iter().map(|(_, n)| n.as_str()).collect();
+    // An unknown name is reported as the user gave it.
+    let unknown: Vec<&str> = given
         .iter()
-        .copied()
-        .filter(|n| !all.iter().any(|v| v.name == *n))
+        .filter(|(_, n)| !all.iter().any(|v| v.name == *n))
+        .map(|(g, _)| *g)
         .collect();
     if !unknown.is_empty() {
         let known: Vec<&str> = all.iter().map(|v| v.name.as_str()).collect();
