@@ -10,7 +10,6 @@ use super::*;
 use crate::eval::{RelationProbe, origin_alignment};
 use crate::logs::tum::write_tum_pose;
 use crate::matching::{MatchLoop, RunWriter, progress_bar};
-use std::io::Write;
 
 /// One trajectory as it streams past: the poses a relation may need and, when there is truth
 /// to score it against, every pose.
@@ -50,9 +49,13 @@ impl Track {
 
 /// Writes raw odometry at the laser times to `path` (TUM), reading the log afresh, and scores
 /// it.
+/// The file is written under a temporary name beside `path` and renamed when complete, so a
+/// pass that fails leaves no partial file.
 pub(super) fn odometry_pass(source: &Source, path: &Path) -> Result<Scores> {
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let file = crate::matching::temp_builder(".odometry.")
+        .tempfile_in(dir)
+        .with_context(|| format!("creating {}", path.display()))?;
     let mut w = std::io::BufWriter::new(file);
     let mut track = Track::new(source)?;
     source.each_record(|r| {
@@ -60,7 +63,10 @@ pub(super) fn odometry_pass(source: &Source, path: &Path) -> Result<Scores> {
             .with_context(|| format!("writing {}", path.display()))?;
         track.push(r.timestamp(), r.odometry)
     })?;
-    w.flush()
+    w.into_inner()
+        .map_err(|e| e.into_error())
+        .and_then(|f| f.as_file().sync_data().map(|()| f))
+        .and_then(|f| f.persist(path).map_err(|e| e.error))
         .with_context(|| format!("writing {}", path.display()))?;
     track.scores(source).context("scoring odometry")
 }
