@@ -1,6 +1,7 @@
 //! `qicp run` on a log source streams the log through every matcher: what it writes is what
 //! `qicp match` writes for the same matcher on the same scans, and it does not depend on how
-//! many matchers run at once.
+//! many matchers run at once. A log on a pipe, read once and held, gives what the file gives,
+//! and a log with ground truth scores its ATE as `qicp eval ate` does, streamed or held.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -270,5 +271,88 @@ fn a_log_on_a_pipe_is_read_once_and_matched_as_the_same_file() {
         );
         assert_eq!(a.len(), 60, "{kind}: one pose a scan");
         assert_eq!(a, b, "{kind}: the pipe gives the file's trajectory");
+    }
+}
+
+#[test]
+fn a_log_with_ground_truth_scores_as_eval_and_as_when_held() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let park = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/park.toml");
+    let sim = dir.path().join("sim");
+    let o = qicp(&[
+        "sim",
+        park.to_str().expect("utf-8"),
+        "--max-scans",
+        "120",
+        "--out",
+        sim.to_str().expect("utf-8"),
+    ]);
+    assert_success(&o, "sim");
+    let config = dir.path().join("run.toml");
+    std::fs::write(
+        &config,
+        "[source]\nlog = \"sim/sim.log\"\ngroundtruth = \"sim/groundtruth.tum\"\n\n\
+         [run]\nmatchers = [\"wsm\", \"q-wsm\"]\n",
+    )
+    .expect("config written");
+    let out = |name: &str| dir.path().join(name);
+    let o = qicp(&[
+        "run",
+        config.to_str().expect("utf-8"),
+        "--out",
+        out("file").to_str().expect("utf-8"),
+        "--quiet",
+    ]);
+    assert_success(&o, "run on the log file");
+    // The same log through a pipe is held in memory: the held and streamed paths must agree.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args([
+            "run",
+            config.to_str().expect("utf-8"),
+            "--log",
+            "/dev/stdin",
+            "--out",
+            out("pipe").to_str().expect("utf-8"),
+            "--quiet",
+        ])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("qicp runs");
+    let log = std::fs::read(sim.join("sim.log")).expect("log");
+    let mut stdin = child.stdin.take().expect("stdin");
+    stdin.write_all(&log).expect("piped");
+    drop(stdin);
+    let o = child.wait_with_output().expect("qicp ends");
+    assert_success(&o, "run on a pipe");
+    let (file, pipe) = (
+        json(&out("file").join("summary.json")),
+        json(&out("pipe").join("summary.json")),
+    );
+    assert_eq!(file["ratios"], pipe["ratios"], "ratios");
+    for kind in ["wsm", "q-wsm"] {
+        let ate = &file["matchers"][kind]["ate_rmse_m"];
+        assert!(ate.as_f64().is_some_and(f64::is_finite), "{kind}: {ate}");
+        assert_eq!(ate, &pipe["matchers"][kind]["ate_rmse_m"], "{kind}: held");
+        let o = qicp(&[
+            "eval",
+            "ate",
+            out("file")
+                .join(kind)
+                .join("trajectory.tum")
+                .to_str()
+                .expect("utf-8"),
+            sim.join("groundtruth.tum").to_str().expect("utf-8"),
+            "--json",
+        ]);
+        assert_success(&o, "eval ate");
+        let eval: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+        let (a, b) = (
+            ate.as_f64().unwrap_or(f64::NAN),
+            eval["ate_rmse_m"].as_f64().unwrap_or(f64::NAN),
+        );
+        assert!((a - b).abs() < 1e-9, "{kind}: run {a}, eval {b}");
     }
 }
