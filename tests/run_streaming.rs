@@ -40,6 +40,31 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&text).expect("JSON")
 }
 
+/// `qicp run CONFIG --log /dev/stdin --out OUT --quiet` with `log` piped in: a pipe, which can
+/// be read only once.
+fn run_on_pipe(config: &Path, out: &Path, log: &[u8]) -> Output {
+    use std::io::Write;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args([
+            "run",
+            config.to_str().expect("utf-8"),
+            "--log",
+            "/dev/stdin",
+            "--out",
+            out.to_str().expect("utf-8"),
+            "--quiet",
+        ])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("qicp runs");
+    let mut stdin = child.stdin.take().expect("stdin");
+    stdin.write_all(log).expect("piped");
+    drop(stdin);
+    child.wait_with_output().expect("qicp ends")
+}
+
 /// `matches.csv` without its wall-time column.
 fn rows_without_times(path: &Path) -> Vec<String> {
     let rows = lines(path);
@@ -202,7 +227,6 @@ fn a_carmen_experiment_starts_as_match_over_the_whole_log() {
 
 #[test]
 fn a_log_on_a_pipe_is_read_once_and_matched_as_the_same_file() {
-    use std::io::Write;
     let dir = tempfile::tempdir().expect("temp dir");
     let mut text = String::new();
     for i in 0..60 {
@@ -244,25 +268,7 @@ fn a_log_on_a_pipe_is_read_once_and_matched_as_the_same_file() {
     ]);
     assert_success(&o, "run on the file");
     // The same bytes through a pipe, which can be read only once.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
-        .args([
-            "run",
-            config.to_str().expect("utf-8"),
-            "--log",
-            "/dev/stdin",
-            "--out",
-            out("pipe").to_str().expect("utf-8"),
-            "--quiet",
-        ])
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("qicp runs");
-    let mut stdin = child.stdin.take().expect("stdin");
-    stdin.write_all(text.as_bytes()).expect("piped");
-    drop(stdin);
-    let o = child.wait_with_output().expect("qicp ends");
+    let o = run_on_pipe(&config, &out("pipe"), text.as_bytes());
     assert_success(&o, "run on a pipe");
     for kind in ["wsm", "q-wsm"] {
         let (a, b) = (
@@ -276,7 +282,6 @@ fn a_log_on_a_pipe_is_read_once_and_matched_as_the_same_file() {
 
 #[test]
 fn a_log_with_ground_truth_scores_as_eval_and_as_when_held() {
-    use std::io::Write;
     let dir = tempfile::tempdir().expect("temp dir");
     let park = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/park.toml");
     let sim = dir.path().join("sim");
@@ -306,26 +311,8 @@ fn a_log_with_ground_truth_scores_as_eval_and_as_when_held() {
     ]);
     assert_success(&o, "run on the log file");
     // The same log through a pipe is held in memory: the held and streamed paths must agree.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
-        .args([
-            "run",
-            config.to_str().expect("utf-8"),
-            "--log",
-            "/dev/stdin",
-            "--out",
-            out("pipe").to_str().expect("utf-8"),
-            "--quiet",
-        ])
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("qicp runs");
     let log = std::fs::read(sim.join("sim.log")).expect("log");
-    let mut stdin = child.stdin.take().expect("stdin");
-    stdin.write_all(&log).expect("piped");
-    drop(stdin);
-    let o = child.wait_with_output().expect("qicp ends");
+    let o = run_on_pipe(&config, &out("pipe"), &log);
     assert_success(&o, "run on a pipe");
     let (file, pipe) = (
         json(&out("file").join("summary.json")),
