@@ -3,6 +3,8 @@
 //! config (which runs again as is) and every picture; bad experiment configs are refused with
 //! the key named.
 
+mod common_csv;
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -373,24 +375,7 @@ fn concurrent_matchers_give_the_sequential_results() {
         assert_eq!(a.len(), 40, "{kind}");
         assert_eq!(a, lines(&three.join(kind).join("trajectory.tum")), "{kind}");
         // Per-scan figures without the time column.
-        let strip = |p: &Path| -> Vec<String> {
-            let rows = lines(p);
-            let header: Vec<&str> = rows[0].split(',').collect();
-            let ms = header
-                .iter()
-                .position(|h| *h == "ms")
-                .expect("an ms column");
-            rows.iter()
-                .map(|r| {
-                    r.split(',')
-                        .enumerate()
-                        .filter(|(i, _)| *i != ms)
-                        .map(|(_, v)| v)
-                        .collect::<Vec<_>>()
-                        .join(",")
-                })
-                .collect()
-        };
+        let strip = |p: &Path| common_csv::without_times(&lines(p));
         assert_eq!(
             strip(&one.join(kind).join("matches.csv")),
             strip(&three.join(kind).join("matches.csv")),

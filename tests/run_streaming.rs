@@ -3,6 +3,8 @@
 //! many matchers run at once. A log on a pipe, read once and held, gives what the file gives,
 //! and a log with ground truth scores its ATE as `qicp eval ate` does, streamed or held.
 
+mod common_csv;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -67,21 +69,7 @@ fn run_on_pipe(config: &Path, out: &Path, log: &[u8]) -> Output {
 
 /// `matches.csv` without its wall-time column.
 fn rows_without_times(path: &Path) -> Vec<String> {
-    let rows = lines(path);
-    let ms = rows[0]
-        .split(',')
-        .position(|h| h == "ms")
-        .expect("an ms column");
-    rows.iter()
-        .map(|r| {
-            r.split(',')
-                .enumerate()
-                .filter(|(i, _)| *i != ms)
-                .map(|(_, v)| v)
-                .collect::<Vec<_>>()
-                .join(",")
-        })
-        .collect()
+    common_csv::without_times(&lines(path))
 }
 
 /// Writes an experiment on `log` (its first `scans`) with the Intel relations.
