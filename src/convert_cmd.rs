@@ -29,6 +29,7 @@ pub struct ConvertArgs {
 
 /// Runs the command.
 pub fn run(args: ConvertArgs) -> Result<()> {
+    crate::matching::remove_on_signal()?;
     let options = LogOptions {
         carmen: CarmenOptions {
             lenient: args.lenient,

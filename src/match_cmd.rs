@@ -140,6 +140,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
     let (Some(log_path), Some(out)) = (&args.log, &args.out) else {
         bail!("give a LOG and --out DIR (or --subscribe)");
     };
+    crate::matching::remove_on_signal()?;
     // Everything that can be refused is checked before the first scan is matched.
     let relations = args
         .relations

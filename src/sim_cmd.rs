@@ -7,11 +7,11 @@
 //! - `summary.json`: the drive's figures (path length, odometry drift, laser returns, timing);
 //! - `config.toml`: the effective configuration.
 
+use crate::matching::OutputFile;
 use anyhow::{Context, Result};
 use qicp_core::Pose2;
 use qicp_sim::{DriveScores, SimConfig, Simulation, render};
-use std::fs::File;
-use std::io::{BufWriter, IsTerminal, Write};
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -55,6 +55,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         return crate::bridge_cmd::print_publish_report(&report);
     }
     let out = a.out.clone().context("--out is required")?;
+    crate::matching::remove_on_signal()?;
     std::fs::create_dir_all(&out)
         .with_context(|| format!("creating output directory {}", out.display()))?;
 
@@ -149,15 +150,14 @@ fn load_drive(path: &Path) -> Result<SimConfig> {
     experiment.source.drive(sim)
 }
 
+/// Writes `path` under a temporary name and renames it into place when complete.
 fn write_file(
     path: &Path,
-    write: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+    write: impl FnOnce(&mut OutputFile) -> std::io::Result<()>,
 ) -> Result<()> {
-    let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut w = BufWriter::new(file);
-    write(&mut w)
-        .and_then(|()| w.flush())
-        .with_context(|| format!("writing {}", path.display()))
+    let mut w = OutputFile::create(path)?;
+    write(&mut w).with_context(|| format!("writing {}", path.display()))?;
+    w.commit()
 }
 
 /// A spinner on stderr when it is a terminal; hidden otherwise (logs, CI, tests).

@@ -45,6 +45,7 @@ pub struct SweepArgs {
 
 /// Runs the command.
 pub fn run(args: SweepArgs) -> Result<()> {
+    crate::matching::remove_on_signal()?;
     // Everything that can be refused is checked before the log is read and before matching.
     let config = crate::match_cmd::load_config(args.config.as_ref(), args.matcher.as_deref())?;
     let all = all_variants(&config);

@@ -284,3 +284,84 @@ fn replaying_a_log_without_laser_records_is_an_error() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("no laser records"), "{}", stderr(&o));
 }
+
+/// Starts `qicp ARGS`, waits until `dir` holds `files` hidden temporary files, sends it
+/// `signal` (by name, through `kill`) and returns what is left in `dir` with how it ended.
+fn stop_when_writing(
+    args: &[&str],
+    dir: &Path,
+    files: usize,
+    signal: &str,
+) -> (Vec<String>, Option<i32>) {
+    use std::os::unix::process::ExitStatusExt;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("runs qicp");
+    let listing = || -> Vec<String> {
+        std::fs::read_dir(dir)
+            .map(|d| {
+                d.map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while listing().iter().filter(|n| n.starts_with('.')).count() < files {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no temporary files: {:?}",
+            listing()
+        );
+        assert!(
+            child.try_wait().expect("status").is_none(),
+            "qicp ended before the signal"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let sent = Command::new("kill")
+        .args([&format!("-{signal}"), &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(sent.success());
+    let status = child.wait().expect("status");
+    (listing(), status.signal())
+}
+
+/// Before the fix a run stopped by SIGTERM or SIGINT left `.trajectory.tum.XXXXXX` and
+/// `.matches.csv.XXXXXX` behind (a signal ends the process without running drops).
+#[test]
+fn a_run_stopped_by_a_signal_leaves_no_temporary_file() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let intel = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/intel/intel.clf.bz2");
+    let args = ["match", s(&intel), "--matcher", "wsm", "--out", s(&out)];
+    let (left, signal) = stop_when_writing(&args, &out, 2, "TERM");
+    assert_eq!(
+        signal,
+        Some(15),
+        "ended by the signal, as without the clean-up"
+    );
+    assert!(left.is_empty(), "left behind: {left:?}");
+
+    // The sweep writes its runs' trajectories from worker threads.
+    let relations = intel.with_extension("").with_extension("relations");
+    let trajectories = dir.path().join("trajectories");
+    let args = [
+        "sweep",
+        s(&intel),
+        "--matcher",
+        "wsm",
+        "--relations",
+        s(&relations),
+        "--trajectories",
+        s(&trajectories),
+        "--jobs",
+        "2",
+    ];
+    let (left, signal) = stop_when_writing(&args, &trajectories, 2, "INT");
+    assert_eq!(signal, Some(2));
+    assert!(left.is_empty(), "left behind: {left:?}");
+}

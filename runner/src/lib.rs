@@ -11,4 +11,5 @@
 #![warn(missing_docs)]
 
 pub mod matching;
+pub mod output;
 pub mod sweep;

@@ -8,6 +8,8 @@ use qicp_matchers::{Check, Estimate, MatcherConfig, Odometry};
 use serde::Serialize;
 use std::io::Write;
 use std::path::Path;
+
+pub use crate::output::{OutputFile, remove_on_signal, write_atomic};
 use std::time::Instant;
 
 /// Per-scan figures, one row of `matches.csv`.
@@ -388,29 +390,25 @@ fn write_row<W: Write>(w: &mut W, r: &ScanRow) -> std::io::Result<()> {
 
 /// The output files of a run, written as the scans come and put in place only when the run
 /// is complete: each file is first written under a temporary name in the output directory and
-/// renamed at [`RunWriter::commit`]; a run that fails or is dropped leaves no partial file.
+/// renamed at [`RunWriter::commit`]; a run that fails or is dropped leaves no partial file
+/// ([`OutputFile`]; with [`crate::output::remove_on_signal`], neither does one stopped by a
+/// signal).
 ///
 /// The directory is created and its files opened before any matching, so a bad `--out` fails
 /// at once.
 #[derive(Debug)]
 pub struct RunWriter {
     dir: std::path::PathBuf,
-    trajectory: std::io::BufWriter<tempfile::NamedTempFile>,
-    matches: std::io::BufWriter<tempfile::NamedTempFile>,
+    trajectory: OutputFile,
+    matches: OutputFile,
 }
 
 impl RunWriter {
     /// Creates `dir` if needed and opens the temporary files in it.
     pub fn create(dir: &Path) -> Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let temp = |name: &str| -> Result<std::io::BufWriter<tempfile::NamedTempFile>> {
-            let file = temp_builder(&format!(".{name}."))
-                .tempfile_in(dir)
-                .with_context(|| format!("cannot write {} in {}", name, dir.display()))?;
-            Ok(std::io::BufWriter::new(file))
-        };
-        let trajectory = temp("trajectory.tum")?;
-        let mut matches = temp("matches.csv")?;
+        let trajectory = OutputFile::create(&dir.join("trajectory.tum"))?;
+        let mut matches = OutputFile::create(&dir.join("matches.csv"))?;
         write_rows_header(&mut matches).context("writing matches.csv")?;
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -428,22 +426,8 @@ impl RunWriter {
 
     /// Writes `config.toml` and `summary.json` (when given) and renames every file into place.
     pub fn commit(self, config: &MatcherConfig, summary: Option<&str>) -> Result<()> {
-        let persist = |w: std::io::BufWriter<tempfile::NamedTempFile>, name: &str| -> Result<()> {
-            let path = self.dir.join(name);
-            let file = w
-                .into_inner()
-                .map_err(|e| e.into_error())
-                .with_context(|| format!("writing {}", path.display()))?;
-            file.as_file()
-                .sync_data()
-                .with_context(|| format!("writing {}", path.display()))?;
-            file.persist(&path)
-                .map_err(|e| e.error)
-                .with_context(|| format!("renaming into {}", path.display()))?;
-            Ok(())
-        };
-        persist(self.trajectory, "trajectory.tum")?;
-        persist(self.matches, "matches.csv")?;
+        self.trajectory.commit()?;
+        self.matches.commit()?;
         write_atomic(&self.dir.join("config.toml"), config.to_toml().as_bytes())?;
         if let Some(text) = summary {
             write_atomic(&self.dir.join("summary.json"), text.as_bytes())?;
@@ -452,76 +436,28 @@ impl RunWriter {
     }
 }
 
-/// Temporary files named `PREFIXXXXXXX`, with the permissions an ordinary file would get
-/// (0644 less the umask), not tempfile's private 0600: they become the outputs.
-pub fn temp_builder(prefix: &str) -> tempfile::Builder<'_, 'static> {
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(prefix).permissions({
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::Permissions::from_mode(0o644)
-    });
-    builder
-}
-
-/// Writes a whole file under a temporary name beside it and renames it into place.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-    let mut file = temp_builder(&format!(".{}.", name.as_deref().unwrap_or("out")))
-        .tempfile_in(dir)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    file.write_all(bytes)
-        .with_context(|| format!("writing {}", path.display()))?;
-    file.persist(path)
-        .map_err(|e| e.error)
-        .with_context(|| format!("renaming into {}", path.display()))?;
-    Ok(())
-}
-
 /// A ROS 2 bag written under a temporary name beside its path and renamed into place by
 /// [`BagOutput::commit`]; dropped before, it leaves no file.
 #[derive(Debug)]
 pub struct BagOutput {
-    path: std::path::PathBuf,
     /// The bag, written to its temporary file.
-    pub writer: qicp_io::rosbag::BagWriter<std::io::BufWriter<tempfile::NamedTempFile>>,
+    pub writer: qicp_io::rosbag::BagWriter<OutputFile>,
 }
 
 impl BagOutput {
     /// Opens the temporary file beside `path` (a bad directory fails here, before any work).
     pub fn create(path: &std::path::Path) -> Result<Self> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => std::path::Path::new("."),
-        };
-        let file = temp_builder(".qicp-bag.")
-            .tempfile_in(dir)
-            .with_context(|| format!("cannot write {}", path.display()))?;
         let writer = qicp_io::rosbag::BagWriter::new(
-            std::io::BufWriter::new(file),
+            OutputFile::create(path)?,
             &path.display().to_string(),
             qicp_io::rosbag::BagLayout::default(),
         )?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            writer,
-        })
+        Ok(Self { writer })
     }
 
     /// Finishes the bag and renames it into place.
     pub fn commit(self) -> Result<()> {
-        let file = self.writer.finish()?;
-        let file = file
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .with_context(|| format!("writing {}", self.path.display()))?;
-        file.persist(&self.path)
-            .map_err(|e| e.error)
-            .with_context(|| format!("renaming into {}", self.path.display()))?;
-        Ok(())
+        self.writer.finish()?.commit()
     }
 }
 

@@ -187,6 +187,7 @@ fn run_matchers(
 
 /// Runs the command.
 pub fn run(args: RunArgs) -> Result<()> {
+    crate::matching::remove_on_signal()?;
     let started = Instant::now();
     let mut config = ExperimentConfig::load(&args.config)?;
     if let Some(log) = &args.log {
@@ -232,8 +233,10 @@ fn run_once(
     started: Instant,
 ) -> Result<Value> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    std::fs::write(out.join("config.toml"), config.effective_toml()?)
-        .with_context(|| format!("writing {}", out.join("config.toml").display()))?;
+    write_atomic(
+        &out.join("config.toml"),
+        config.effective_toml()?.as_bytes(),
+    )?;
 
     let t = Instant::now();
     let source = Source::load(&config.source)?;

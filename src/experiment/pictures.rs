@@ -2,13 +2,11 @@
 
 use super::*;
 
+/// Writes `traj` to `path` (TUM) under a temporary name, renamed into place when complete.
 pub(super) fn write_trajectory(path: &Path, traj: &[Stamped]) -> Result<()> {
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(file);
+    let mut w = crate::matching::OutputFile::create(path)?;
     write_tum(&mut w, traj).with_context(|| format!("writing {}", path.display()))?;
-    std::io::Write::flush(&mut w).with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    w.commit()
 }
 
 /// `traj` moved so its first pose lies on `truth`'s first (the ATE alignment of

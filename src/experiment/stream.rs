@@ -52,22 +52,14 @@ impl Track {
 /// The file is written under a temporary name beside `path` and renamed when complete, so a
 /// pass that fails leaves no partial file.
 pub(super) fn odometry_pass(source: &Source, path: &Path) -> Result<Scores> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let file = crate::matching::temp_builder(".odometry.")
-        .tempfile_in(dir)
-        .with_context(|| format!("creating {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(file);
+    let mut w = crate::matching::OutputFile::create(path)?;
     let mut track = Track::new(source)?;
     source.each_record(|r| {
         write_tum_pose(&mut w, r.timestamp(), &r.odometry)
             .with_context(|| format!("writing {}", path.display()))?;
         track.push(r.timestamp(), r.odometry)
     })?;
-    w.into_inner()
-        .map_err(|e| e.into_error())
-        .and_then(|f| f.as_file().sync_data().map(|()| f))
-        .and_then(|f| f.persist(path).map_err(|e| e.error))
-        .with_context(|| format!("writing {}", path.display()))?;
+    w.commit()?;
     track.scores(source).context("scoring odometry")
 }
 

@@ -89,18 +89,10 @@ impl Job {
         let Some(path) = input.trajectory_path(&self.name) else {
             return self.run_on(input.records()?, &input.relations);
         };
-        let dir = path.parent().unwrap_or(Path::new("."));
         // Readable like every other output (0644), and on disk before it takes its name.
-        let file = crate::matching::temp_builder(".trajectory.")
-            .tempfile_in(dir)
-            .with_context(|| format!("writing into {}", dir.display()))?;
-        let mut out = std::io::BufWriter::new(file);
+        let mut out = crate::output::OutputFile::create(&path)?;
         let figures = self.run_writing(input.records()?, &input.relations, Some(&mut out))?;
-        out.into_inner()
-            .map_err(|e| e.into_error())
-            .and_then(|f| f.as_file().sync_data().map(|()| f))
-            .and_then(|f| f.persist(&path).map_err(|e| e.error))
-            .with_context(|| format!("writing {}", path.display()))?;
+        out.commit()?;
         Ok(figures)
     }
 

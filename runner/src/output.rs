@@ -1,0 +1,257 @@
+//! Output files that appear complete or not at all, even when the process is stopped by a
+//! signal.
+//!
+//! An [`OutputFile`] is written under a hidden temporary name beside its path
+//! (`.trajectory.tum.XXXXXX`) and renamed into place by [`OutputFile::commit`]; dropped before
+//! (an error, a panic), it removes its temporary file. A signal ends a process without running
+//! drops, so every temporary file is also listed here while it lives, and
+//! [`remove_on_signal`] starts a thread that, on SIGINT, SIGTERM or SIGHUP, removes the listed
+//! files and then lets the signal end the process as it would have (exit status 128 + signal
+//! in a shell). Nothing is ever written under the final names but by the rename.
+
+use anyhow::{Context, Result};
+use std::collections::BTreeMap;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, OnceLock, PoisonError};
+use tempfile::NamedTempFile;
+
+/// The temporary files alive in this process, by registration number.
+static LIVE: Mutex<Registry> = Mutex::new(Registry {
+    next: 0,
+    paths: BTreeMap::new(),
+});
+
+#[derive(Debug)]
+struct Registry {
+    next: u64,
+    paths: BTreeMap<u64, PathBuf>,
+}
+
+fn live() -> MutexGuard<'static, Registry> {
+    LIVE.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// A listed temporary file; unlisted when dropped.
+#[derive(Debug)]
+struct Listed(u64);
+
+impl Drop for Listed {
+    fn drop(&mut self) {
+        live().paths.remove(&self.0);
+    }
+}
+
+/// A file written under a temporary name beside `path` and renamed into place when complete.
+#[derive(Debug)]
+pub struct OutputFile {
+    path: PathBuf,
+    file: BufWriter<NamedTempFile>,
+    // Declared after `file`, so it is unlisted only once the file is removed or renamed.
+    _listed: Listed,
+}
+
+impl OutputFile {
+    /// Opens the temporary file in `path`'s directory (which must exist: a bad path fails here,
+    /// before any work), with the permissions an ordinary new file gets (0644 less the umask),
+    /// not tempfile's private 0600, since it becomes the output.
+    pub fn create(path: &Path) -> Result<Self> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let name = path
+            .file_name()
+            .map_or_else(|| "out".into(), |n| n.to_string_lossy());
+        let prefix = format!(".{name}.");
+        let mut builder = tempfile::Builder::new();
+        builder.prefix(&prefix).permissions({
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::Permissions::from_mode(0o644)
+        });
+        // Created and listed under one lock: a signal's removal (which takes the lock) sees
+        // either no file or a listed one.
+        let mut registry = live();
+        let file = builder
+            .tempfile_in(dir)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let number = registry.next;
+        registry.next += 1;
+        registry.paths.insert(number, file.path().to_path_buf());
+        drop(registry);
+        Ok(Self {
+            path: path.to_path_buf(),
+            file: BufWriter::new(file),
+            _listed: Listed(number),
+        })
+    }
+
+    /// The final path.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Flushes the file, syncs its data to disk and renames it to its path.
+    pub fn commit(self) -> Result<()> {
+        let Self {
+            path,
+            file,
+            _listed,
+        } = self;
+        let file = file
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .with_context(|| format!("writing {}", path.display()))?;
+        file.as_file()
+            .sync_data()
+            .with_context(|| format!("writing {}", path.display()))?;
+        file.persist(&path)
+            .map_err(|e| e.error)
+            .with_context(|| format!("renaming into {}", path.display()))?;
+        Ok(())
+    }
+}
+
+impl Write for OutputFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.file.write(buf)
+    }
+
+    fn write_all(&mut self, buf: &[u8]) -> std::io::Result<()> {
+        self.file.write_all(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl Seek for OutputFile {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        self.file.seek(pos)
+    }
+}
+
+/// Writes a whole file under a temporary name beside `path` and renames it into place.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut file = OutputFile::create(path)?;
+    file.write_all(bytes)
+        .with_context(|| format!("writing {}", path.display()))?;
+    file.commit()
+}
+
+/// Starts (once per process) the thread that removes every live [`OutputFile`]'s temporary
+/// file when SIGINT, SIGTERM or SIGHUP arrives, then ends the process by that signal's default
+/// action. Call it at the start of a command that writes outputs; not in a process whose
+/// signals something else handles (an iceoryx2 node stops its loops on them and exits
+/// cleanly, removing its temporary files through their drops).
+pub fn remove_on_signal() -> Result<()> {
+    static STARTED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
+    STARTED
+        .get_or_init(|| start_signal_thread().map_err(|e| e.to_string()))
+        .clone()
+        .map_err(|e| anyhow::anyhow!("cannot watch for signals: {e}"))
+}
+
+fn start_signal_thread() -> std::io::Result<()> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])?;
+    std::thread::Builder::new()
+        .name("qicp-output-signals".into())
+        .spawn(move || {
+            if let Some(signal) = signals.forever().next() {
+                // Held until the process ends: no new temporary file can appear meanwhile.
+                let registry = live();
+                remove_all(&registry);
+                let _ = signal_hook::low_level::emulate_default_handler(signal);
+                std::process::exit(128 + signal);
+            }
+        })?;
+    Ok(())
+}
+
+fn remove_all(registry: &Registry) {
+    for path in registry.paths.values() {
+        // Already renamed or removed: nothing to do.
+        let _ = std::fs::remove_file(path);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hidden_files(dir: &Path) -> Vec<String> {
+        std::fs::read_dir(dir)
+            .expect("dir")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with('.'))
+            .collect()
+    }
+
+    #[test]
+    fn an_output_file_appears_only_when_committed_and_is_unlisted_after() {
+        let dir = tempfile::tempdir().expect("dir");
+        let path = dir.path().join("trajectory.tum");
+        let mut out = OutputFile::create(&path).expect("created");
+        let temp = out.file.get_ref().path().to_path_buf();
+        assert!(live().paths.values().any(|p| *p == temp));
+        out.write_all(b"0 0 0 0 0 0 0 1\n").expect("written");
+        assert!(!path.exists());
+        assert_eq!(hidden_files(dir.path()).len(), 1);
+        assert!(
+            hidden_files(dir.path())[0].starts_with(".trajectory.tum."),
+            "{:?}",
+            hidden_files(dir.path())
+        );
+        out.commit().expect("committed");
+        assert_eq!(
+            std::fs::read_to_string(&path).expect("read"),
+            "0 0 0 0 0 0 0 1\n"
+        );
+        assert!(hidden_files(dir.path()).is_empty());
+        assert!(!live().paths.values().any(|p| *p == temp));
+    }
+
+    #[test]
+    fn a_dropped_output_file_leaves_nothing() {
+        let dir = tempfile::tempdir().expect("dir");
+        let path = dir.path().join("matches.csv");
+        let mut out = OutputFile::create(&path).expect("created");
+        out.write_all(b"partial").expect("written");
+        drop(out);
+        assert!(!path.exists());
+        assert!(hidden_files(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn the_signal_removal_removes_live_temporary_files_and_nothing_committed() {
+        let dir = tempfile::tempdir().expect("dir");
+        let kept = OutputFile::create(&dir.path().join("a.tum")).expect("a");
+        let committed = OutputFile::create(&dir.path().join("b.tum")).expect("b");
+        // What the signal thread would find listed (a registry of their own: the process's
+        // holds the files of tests running beside this one).
+        let registry = Registry {
+            next: 2,
+            paths: [kept.file.get_ref().path(), committed.file.get_ref().path()]
+                .into_iter()
+                .enumerate()
+                .map(|(i, p)| (i as u64, p.to_path_buf()))
+                .collect(),
+        };
+        committed.commit().expect("b committed");
+        remove_all(&registry);
+        assert!(hidden_files(dir.path()).is_empty());
+        assert!(dir.path().join("b.tum").exists());
+        drop(kept);
+    }
+
+    #[test]
+    fn an_output_in_a_missing_directory_fails_at_creation_naming_it() {
+        let dir = tempfile::tempdir().expect("dir");
+        let path = dir.path().join("no-such-dir").join("summary.json");
+        let error = OutputFile::create(&path).expect_err("refused");
+        assert!(format!("{error:#}").contains("summary.json"), "{error:#}");
+    }
+}
