@@ -27,6 +27,8 @@ mod solve;
 
 pub use solve::{PointToLine, solve};
 
+use solve::SymmetricSums;
+
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use qicp_core::{
     CorrespondenceMetric, Fallback, MatchResult, Pair, Point2, Pose2, Query, Reference, Scan,
@@ -161,6 +163,10 @@ pub struct PlIcp<C> {
     scratch: Vec<f64>,
     /// The scan's own normals, in its frame.
     normals: Vec<Vector2<f64>>,
+    /// Per scan point, the reference point it was last paired with in this match and that
+    /// pair's weight `[w00, w01, w11]` (`u32::MAX`: none yet): a pair is mostly formed again
+    /// in the next iteration, and its weight depends on the reference point alone.
+    weights: Vec<(u32, [f64; 3])>,
 }
 
 impl<C: CorrespondenceMetric + Default> PlIcp<C> {
@@ -175,35 +181,57 @@ impl<C: CorrespondenceMetric + Default> PlIcp<C> {
     }
 }
 
-impl<C: CorrespondenceMetric> PlIcp<C> {
-    /// The weight (2×2 information) of a pair at reference point `id`: `n nᵀ/σ²` along the
-    /// normal, `tangent_weight` of it along the line; isotropic without a normal.
-    fn weight<I: SpatialIndex>(&self, reference: &Reference<I>, id: u32) -> Matrix2<f64> {
-        let at = &reference.info()[id as usize];
-        let n = at.normal;
-        if n == Vector2::zeros() {
-            return Matrix2::identity() / (self.params.sigma * self.params.sigma);
-        }
-        // The reference point's own noise across its line, twice (the scan point's is alike).
-        let info =
-            1.0 / (self.params.sigma * self.params.sigma + 2.0 * n.dot(&(at.covariance * n)));
-        let t = Vector2::new(-n.y, n.x);
-        (n * n.transpose() + t * t.transpose() * self.params.tangent_weight) * info
+/// The weight (2×2 information) of a pair at reference point `id`: `n nᵀ/σ²` along the
+/// normal, `tangent_weight` of it along the line; isotropic without a normal. It is
+/// symmetric bit for bit (`n₀n₁ = n₁n₀`).
+fn weight<I: SpatialIndex>(
+    params: &PlIcpParams,
+    reference: &Reference<I>,
+    id: u32,
+) -> Matrix2<f64> {
+    let at = &reference.info()[id as usize];
+    let n = at.normal;
+    if n == Vector2::zeros() {
+        return Matrix2::identity() / (params.sigma * params.sigma);
     }
+    // The reference point's own noise across its line, twice (the scan point's is alike).
+    let info = 1.0 / (params.sigma * params.sigma + 2.0 * n.dot(&(at.covariance * n)));
+    let t = Vector2::new(-n.y, n.x);
+    (n * n.transpose() + t * t.transpose() * params.tangent_weight) * info
+}
 
+/// [`weight`] of `pair` as `[w00, w01, w11]`, from `cache` (by scan point) when the scan
+/// point was paired with the same reference point before.
+#[inline]
+fn cached_weight<I: SpatialIndex>(
+    cache: &mut [(u32, [f64; 3])],
+    params: &PlIcpParams,
+    reference: &Reference<I>,
+    pair: &Pair,
+) -> [f64; 3] {
+    let slot = &mut cache[pair.scan as usize];
+    if slot.0 != pair.reference {
+        let w = weight(params, reference, pair.reference);
+        *slot = (pair.reference, [w[(0, 0)], w[(0, 1)], w[(1, 1)]]);
+    }
+    slot.1
+}
+
+impl<C: CorrespondenceMetric> PlIcp<C> {
     /// The point-to-line system of the current pairs, with the prior's blocks.
     fn system<I: SpatialIndex>(
-        &self,
+        &mut self,
         reference: &Reference<I>,
         local: &[Point2<f64>],
         prior: Option<(&Matrix3<f64>, &Pose2)>,
     ) -> PointToLine {
         let refs = reference.index().points();
-        let mut system = PointToLine::default();
+        let mut sums = SymmetricSums::default();
         for p in &self.pairs {
-            let w = self.weight(reference, p.reference);
-            system.add(&local[p.scan as usize], &refs[p.reference as usize], &w);
+            let w = cached_weight(&mut self.weights, &self.params, reference, p);
+            sums.add(&local[p.scan as usize], &refs[p.reference as usize], &w);
         }
+        let mut system = sums.system();
         if let Some((lambda, guess)) = prior {
             system.add_prior(lambda, guess);
         }
@@ -212,7 +240,7 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
 
     /// Information and variance factor of the pairs at `pose`, for the covariance.
     fn information<I: SpatialIndex>(
-        &self,
+        &mut self,
         reference: &Reference<I>,
         local: &[Point2<f64>],
         pose: &Pose2,
@@ -221,7 +249,8 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
         let (rot, t) = (pose.rotation(), pose.translation());
         let mut ne = NormalEquations::default();
         for p in &self.pairs {
-            let w = self.weight(reference, p.reference);
+            let [w00, w01, w11] = cached_weight(&mut self.weights, &self.params, reference, p);
+            let w = Matrix2::new(w00, w01, w01, w11);
             let rb = rot * local[p.scan as usize].coords;
             ne.add(&refs[p.reference as usize], &rb, &t, &w);
         }
@@ -246,6 +275,9 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         }
         let local = scan.points();
         self.metric.begin_scan(local);
+        // The reference is another one in every call.
+        self.weights.clear();
+        self.weights.resize(local.len(), (u32::MAX, [0.0; 3]));
         self.normals.clear();
         if self.params.max_normal_angle_deg > 0.0 {
             let info = qicp_core::scan_point_info(scan, reference.noise());

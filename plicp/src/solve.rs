@@ -80,6 +80,82 @@ impl PointToLine {
     }
 }
 
+/// The sums of [`PointToLine::add`] for symmetric weights, kept in scalars rather than a
+/// 4×4 matrix in memory: the same products and sums of the same values in the same order,
+/// so [`SymmetricSums::system`] is the [`PointToLine`] that `add` builds, bit for bit.
+///
+/// `add` multiplies `Mᵢ`'s ones and zeros in; those products only change the sign of a zero
+/// term, and a sum that starts from +0 never keeps a −0 (+0 + −0 = +0), so leaving them out
+/// changes no bit. With `W` symmetric, `Mᵢᵀ W Mᵢ` is symmetric bit for bit except for its
+/// lower-right 2×2 block, whose two off-diagonal entries are summed in different orders
+/// and are kept apart here.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct SymmetricSums {
+    m00: f64,
+    m01: f64,
+    m11: f64,
+    m02: f64,
+    m03: f64,
+    m12: f64,
+    m13: f64,
+    m22: f64,
+    m23: f64,
+    m32: f64,
+    m33: f64,
+    g: [f64; 4],
+    pairs: usize,
+}
+
+impl SymmetricSums {
+    /// [`PointToLine::add`] with `w = [[w00, w01], [w01, w11]]` given as `[w00, w01, w11]`.
+    #[inline]
+    pub(crate) fn add(&mut self, p: &Point2<f64>, q: &Point2<f64>, w: &[f64; 3]) {
+        let [w00, w01, w11] = *w;
+        let (px, py) = (p.x, p.y);
+        let npy = -py;
+        // W·Mᵢ: its first two columns are W's own.
+        let wm02 = w00 * px + w01 * py;
+        let wm12 = w01 * px + w11 * py;
+        let wm03 = w00 * npy + w01 * px;
+        let wm13 = w01 * npy + w11 * px;
+        // Mᵢᵀ·(W·Mᵢ): the first two rows are W·Mᵢ, the rows below mirror its columns.
+        self.m00 += w00;
+        self.m01 += w01;
+        self.m11 += w11;
+        self.m02 += wm02;
+        self.m03 += wm03;
+        self.m12 += wm12;
+        self.m13 += wm13;
+        self.m22 += px * wm02 + py * wm12;
+        self.m23 += px * wm03 + py * wm13;
+        self.m32 += npy * wm02 + px * wm12;
+        self.m33 += npy * wm03 + px * wm13;
+        // −2 (W·Mᵢ)ᵀ q, with the 2 on the matrix as `add` has it.
+        let (qx, qy) = (q.x, q.y);
+        self.g[0] -= (2.0 * w00) * qx + (2.0 * w01) * qy;
+        self.g[1] -= (2.0 * w01) * qx + (2.0 * w11) * qy;
+        self.g[2] -= (2.0 * wm02) * qx + (2.0 * wm12) * qy;
+        self.g[3] -= (2.0 * wm03) * qx + (2.0 * wm13) * qy;
+        self.pairs += 1;
+    }
+
+    /// The system of the pairs added.
+    pub(crate) fn system(&self) -> PointToLine {
+        #[rustfmt::skip]
+        let m = Matrix4::new(
+            self.m00, self.m01, self.m02, self.m03,
+            self.m01, self.m11, self.m12, self.m13,
+            self.m02, self.m12, self.m22, self.m23,
+            self.m03, self.m13, self.m32, self.m33,
+        );
+        PointToLine {
+            m,
+            g: Vector4::from(self.g),
+            pairs: self.pairs,
+        }
+    }
+}
+
 /// The pose minimising `system`'s cost exactly; `None` when it does not fix the pose (a
 /// singular translation block, or no information on the rotation).
 #[must_use]
@@ -265,6 +341,51 @@ mod tests {
                 "round {round}: θ {} vs {}",
                 exact.theta,
                 brute.theta
+            );
+        }
+    }
+
+    /// A coordinate or weight, sometimes exactly ±0 or ±1 so that the terms `add` multiplies
+    /// by `Mᵢ`'s zeros and ones meet signed zeros.
+    fn value(rng: &mut Lcg, lo: f64, hi: f64) -> f64 {
+        match (rng.next() * 8.0) as u32 {
+            0 => 0.0,
+            1 => -0.0,
+            2 => 1.0,
+            3 => -1.0,
+            _ => rng.range(lo, hi),
+        }
+    }
+
+    #[test]
+    fn the_symmetric_sums_are_the_plain_system_bit_for_bit() {
+        let mut rng = Lcg(11);
+        for round in 0..2_000 {
+            let mut plain = PointToLine::default();
+            let mut sums = SymmetricSums::default();
+            for _ in 0..(rng.next() * 60.0) as usize {
+                let p = Point2::new(value(&mut rng, -30.0, 30.0), value(&mut rng, -30.0, 30.0));
+                let q = Point2::new(value(&mut rng, -30.0, 30.0), value(&mut rng, -30.0, 30.0));
+                let w = [
+                    value(&mut rng, 0.0, 3000.0),
+                    value(&mut rng, -3000.0, 3000.0),
+                    value(&mut rng, 0.0, 3000.0),
+                ];
+                plain.add(&p, &q, &Matrix2::new(w[0], w[1], w[1], w[2]));
+                sums.add(&p, &q, &w);
+            }
+            let fast = sums.system();
+            assert_eq!(fast.pairs, plain.pairs);
+            let bits = |s: &PointToLine| {
+                (
+                    s.m.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    s.g.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                )
+            };
+            assert_eq!(
+                bits(&fast),
+                bits(&plain),
+                "round {round}: {fast:?} vs {plain:?}"
             );
         }
     }
