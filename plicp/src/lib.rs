@@ -23,6 +23,7 @@
 //! ```
 #![warn(missing_docs)]
 
+mod normals;
 mod solve;
 
 pub use solve::{PointToLine, solve};
@@ -167,6 +168,8 @@ pub struct PlIcp<C> {
     /// pair's weight `[w00, w01, w11]` (`u32::MAX`: none yet): a pair is mostly formed again
     /// in the next iteration, and its weight depends on the reference point alone.
     weights: Vec<(u32, [f64; 3])>,
+    /// Scratch of the scan's normals.
+    connected: Vec<bool>,
 }
 
 impl<C: CorrespondenceMetric + Default> PlIcp<C> {
@@ -280,8 +283,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         self.weights.resize(local.len(), (u32::MAX, [0.0; 3]));
         self.normals.clear();
         if self.params.max_normal_angle_deg > 0.0 {
-            let info = qicp_core::scan_point_info(scan, reference.noise());
-            self.normals.extend(info.iter().map(|i| i.normal));
+            normals::scan_normals(scan, &mut self.connected, &mut self.normals);
         }
         let prior = prior.as_ref().map(|l| (l, &guess));
         let mut pose = guess;
