@@ -28,7 +28,7 @@ mod solve;
 
 pub use solve::{PointToLine, solve};
 
-use solve::SymmetricSums;
+use solve::{PairTerms, SymmetricSums};
 
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use qicp_core::{
@@ -164,10 +164,12 @@ pub struct PlIcp<C> {
     scratch: Vec<f64>,
     /// The scan's own normals, in its frame.
     normals: Vec<Vector2<f64>>,
-    /// Per scan point, the reference point it was last paired with in this match and that
-    /// pair's weight `[w00, w01, w11]` (`u32::MAX`: none yet): a pair is mostly formed again
-    /// in the next iteration, and its weight depends on the reference point alone.
-    weights: Vec<(u32, [f64; 3])>,
+    /// Per scan point, the pair it last formed and that pair's terms of the system: a pair
+    /// is mostly formed again in the next iteration, and its terms depend on it alone.
+    terms: Vec<CachedTerms>,
+    /// Which call of [`ScanMatcher::match_with_prior`] this is, so the entries of `terms`
+    /// from earlier calls (another reference) never match; from 1.
+    call: u32,
     /// Scratch of the scan's normals.
     connected: Vec<bool>,
 }
@@ -203,21 +205,38 @@ fn weight<I: SpatialIndex>(
     (n * n.transpose() + t * t.transpose() * params.tangent_weight) * info
 }
 
-/// [`weight`] of `pair` as `[w00, w01, w11]`, from `cache` (by scan point) when the scan
-/// point was paired with the same reference point before.
+/// A scan point's last pair in one call and its terms of the system.
+#[derive(Debug, Clone, Copy, Default)]
+struct CachedTerms {
+    /// The call in the high 32 bits, the reference point in the low ones; 0: none.
+    key: u64,
+    /// [`SymmetricSums::terms`] of the pair; the weight `[w00, w01, w11]` leads them.
+    terms: PairTerms,
+}
+
+/// The terms of `pair` in call `call`, from `cache` (by scan point) when the scan point formed
+/// the same pair before in this call.
 #[inline]
-fn cached_weight<I: SpatialIndex>(
-    cache: &mut [(u32, [f64; 3])],
+fn cached_terms<'c, I: SpatialIndex>(
+    cache: &'c mut [CachedTerms],
+    call: u32,
     params: &PlIcpParams,
     reference: &Reference<I>,
+    local: &[Point2<f64>],
     pair: &Pair,
-) -> [f64; 3] {
+) -> &'c PairTerms {
+    let key = (u64::from(call) << 32) | u64::from(pair.reference);
     let slot = &mut cache[pair.scan as usize];
-    if slot.0 != pair.reference {
+    if slot.key != key {
         let w = weight(params, reference, pair.reference);
-        *slot = (pair.reference, [w[(0, 0)], w[(0, 1)], w[(1, 1)]]);
+        let q = &reference.index().points()[pair.reference as usize];
+        let w = [w[(0, 0)], w[(0, 1)], w[(1, 1)]];
+        *slot = CachedTerms {
+            key,
+            terms: SymmetricSums::terms(&local[pair.scan as usize], q, &w),
+        };
     }
-    slot.1
+    &slot.terms
 }
 
 impl<C: CorrespondenceMetric> PlIcp<C> {
@@ -228,11 +247,17 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
         local: &[Point2<f64>],
         prior: Option<(&Matrix3<f64>, &Pose2)>,
     ) -> PointToLine {
-        let refs = reference.index().points();
         let mut sums = SymmetricSums::default();
         for p in &self.pairs {
-            let w = cached_weight(&mut self.weights, &self.params, reference, p);
-            sums.add(&local[p.scan as usize], &refs[p.reference as usize], &w);
+            let terms = cached_terms(
+                &mut self.terms,
+                self.call,
+                &self.params,
+                reference,
+                local,
+                p,
+            );
+            sums.add_terms(terms);
         }
         let mut system = sums.system();
         if let Some((lambda, guess)) = prior {
@@ -252,8 +277,15 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
         let (rot, t) = (pose.rotation(), pose.translation());
         let mut ne = NormalEquations::default();
         for p in &self.pairs {
-            let [w00, w01, w11] = cached_weight(&mut self.weights, &self.params, reference, p);
-            let w = Matrix2::new(w00, w01, w01, w11);
+            let terms = cached_terms(
+                &mut self.terms,
+                self.call,
+                &self.params,
+                reference,
+                local,
+                p,
+            );
+            let w = Matrix2::new(terms[0], terms[1], terms[1], terms[2]);
             let rb = rot * local[p.scan as usize].coords;
             ne.add(&refs[p.reference as usize], &rb, &t, &w);
         }
@@ -278,9 +310,15 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         }
         let local = scan.points();
         self.metric.begin_scan(local);
-        // The reference is another one in every call.
-        self.weights.clear();
-        self.weights.resize(local.len(), (u32::MAX, [0.0; 3]));
+        // The reference is another one in every call: earlier calls' terms are keyed apart.
+        if self.call == u32::MAX {
+            self.terms.clear();
+            self.call = 0;
+        }
+        self.call += 1;
+        if self.terms.len() < local.len() {
+            self.terms.resize(local.len(), CachedTerms::default());
+        }
         self.normals.clear();
         if self.params.max_normal_angle_deg > 0.0 {
             normals::scan_normals(scan, &mut self.connected, &mut self.normals);

@@ -91,25 +91,25 @@ impl PointToLine {
 /// and are kept apart here.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct SymmetricSums {
-    m00: f64,
-    m01: f64,
-    m11: f64,
-    m02: f64,
-    m03: f64,
-    m12: f64,
-    m13: f64,
-    m22: f64,
-    m23: f64,
-    m32: f64,
-    m33: f64,
-    g: [f64; 4],
+    /// `M`'s entries 00, 01, 11, 02, 03, 12, 13, 22, 23, 32, 33, then `g`.
+    sums: PairTerms,
     pairs: usize,
 }
 
+/// What one pair adds to [`SymmetricSums`] (`M`'s entries, then what `g` loses), a function
+/// of the pair alone: computed once, it may be added again whenever the pair is formed again.
+pub(crate) type PairTerms = [f64; 15];
+
 impl SymmetricSums {
     /// [`PointToLine::add`] with `w = [[w00, w01], [w01, w11]]` given as `[w00, w01, w11]`.
-    #[inline]
+    #[cfg(test)]
     pub(crate) fn add(&mut self, p: &Point2<f64>, q: &Point2<f64>, w: &[f64; 3]) {
+        self.add_terms(&Self::terms(p, q, w));
+    }
+
+    /// The terms of the pair `(p, q)` with weight `[w00, w01, w11]`.
+    #[inline]
+    pub(crate) fn terms(p: &Point2<f64>, q: &Point2<f64>, w: &[f64; 3]) -> PairTerms {
         let [w00, w01, w11] = *w;
         let (px, py) = (p.x, p.y);
         let npy = -py;
@@ -118,39 +118,69 @@ impl SymmetricSums {
         let wm12 = w01 * px + w11 * py;
         let wm03 = w00 * npy + w01 * px;
         let wm13 = w01 * npy + w11 * px;
-        // Mᵢᵀ·(W·Mᵢ): the first two rows are W·Mᵢ, the rows below mirror its columns.
-        self.m00 += w00;
-        self.m01 += w01;
-        self.m11 += w11;
-        self.m02 += wm02;
-        self.m03 += wm03;
-        self.m12 += wm12;
-        self.m13 += wm13;
-        self.m22 += px * wm02 + py * wm12;
-        self.m23 += px * wm03 + py * wm13;
-        self.m32 += npy * wm02 + px * wm12;
-        self.m33 += npy * wm03 + px * wm13;
-        // −2 (W·Mᵢ)ᵀ q, with the 2 on the matrix as `add` has it.
         let (qx, qy) = (q.x, q.y);
-        self.g[0] -= (2.0 * w00) * qx + (2.0 * w01) * qy;
-        self.g[1] -= (2.0 * w01) * qx + (2.0 * w11) * qy;
-        self.g[2] -= (2.0 * wm02) * qx + (2.0 * wm12) * qy;
-        self.g[3] -= (2.0 * wm03) * qx + (2.0 * wm13) * qy;
+        [
+            // Mᵢᵀ·(W·Mᵢ): the first two rows are W·Mᵢ, the rows below mirror its columns.
+            w00,
+            w01,
+            w11,
+            wm02,
+            wm03,
+            wm12,
+            wm13,
+            px * wm02 + py * wm12,
+            px * wm03 + py * wm13,
+            npy * wm02 + px * wm12,
+            npy * wm03 + px * wm13,
+            // 2 (W·Mᵢ)ᵀ q, with the 2 on the matrix as `add` has it.
+            (2.0 * w00) * qx + (2.0 * w01) * qy,
+            (2.0 * w01) * qx + (2.0 * w11) * qy,
+            (2.0 * wm02) * qx + (2.0 * wm12) * qy,
+            (2.0 * wm03) * qx + (2.0 * wm13) * qy,
+        ]
+    }
+
+    /// Adds one pair's terms.
+    #[inline]
+    pub(crate) fn add_terms(&mut self, terms: &PairTerms) {
+        for (s, t) in self.sums[..11].iter_mut().zip(&terms[..11]) {
+            *s += t;
+        }
+        for (s, t) in self.sums[11..].iter_mut().zip(&terms[11..]) {
+            *s -= t;
+        }
         self.pairs += 1;
     }
 
     /// The system of the pairs added.
     pub(crate) fn system(&self) -> PointToLine {
+        let [
+            m00,
+            m01,
+            m11,
+            m02,
+            m03,
+            m12,
+            m13,
+            m22,
+            m23,
+            m32,
+            m33,
+            g0,
+            g1,
+            g2,
+            g3,
+        ] = self.sums;
         #[rustfmt::skip]
         let m = Matrix4::new(
-            self.m00, self.m01, self.m02, self.m03,
-            self.m01, self.m11, self.m12, self.m13,
-            self.m02, self.m12, self.m22, self.m23,
-            self.m03, self.m13, self.m32, self.m33,
+            m00, m01, m02, m03,
+            m01, m11, m12, m13,
+            m02, m12, m22, m23,
+            m03, m13, m32, m33,
         );
         PointToLine {
             m,
-            g: Vector4::from(self.g),
+            g: Vector4::new(g0, g1, g2, g3),
             pairs: self.pairs,
         }
     }
