@@ -172,6 +172,9 @@ pub struct PlIcp<C> {
     call: u32,
     /// Scratch of the scan's normals.
     connected: Vec<bool>,
+    /// The plain computations the fast ones must equal bit for bit (tests only).
+    #[cfg(test)]
+    plain: bool,
 }
 
 impl<C: CorrespondenceMetric + Default> PlIcp<C> {
@@ -247,6 +250,10 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
         local: &[Point2<f64>],
         prior: Option<(&Matrix3<f64>, &Pose2)>,
     ) -> PointToLine {
+        #[cfg(test)]
+        if self.plain {
+            return self.plain_system(reference, local, prior);
+        }
         let mut sums = SymmetricSums::default();
         for p in &self.pairs {
             let terms = cached_terms(
@@ -260,6 +267,26 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
             sums.add_terms(terms);
         }
         let mut system = sums.system();
+        if let Some((lambda, guess)) = prior {
+            system.add_prior(lambda, guess);
+        }
+        system
+    }
+
+    /// The system as it is plainly written: a weight and a [`PointToLine::add`] per pair.
+    #[cfg(test)]
+    fn plain_system<I: SpatialIndex>(
+        &self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        prior: Option<(&Matrix3<f64>, &Pose2)>,
+    ) -> PointToLine {
+        let refs = reference.index().points();
+        let mut system = PointToLine::default();
+        for p in &self.pairs {
+            let w = weight(&self.params, reference, p.reference);
+            system.add(&local[p.scan as usize], &refs[p.reference as usize], &w);
+        }
         if let Some((lambda, guess)) = prior {
             system.add_prior(lambda, guess);
         }
@@ -286,6 +313,12 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
                 p,
             );
             let w = Matrix2::new(terms[0], terms[1], terms[1], terms[2]);
+            #[cfg(test)]
+            let w = if self.plain {
+                weight(&self.params, reference, p.reference)
+            } else {
+                w
+            };
             let rb = rot * local[p.scan as usize].coords;
             ne.add(&refs[p.reference as usize], &rb, &t, &w);
         }
@@ -322,6 +355,12 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         self.normals.clear();
         if self.params.max_normal_angle_deg > 0.0 {
             normals::scan_normals(scan, &mut self.connected, &mut self.normals);
+            #[cfg(test)]
+            if self.plain {
+                let info = qicp_core::scan_point_info(scan, reference.noise());
+                self.normals.clear();
+                self.normals.extend(info.iter().map(|i| i.normal));
+            }
         }
         let prior = prior.as_ref().map(|l| (l, &guess));
         let mut pose = guess;
@@ -470,5 +509,87 @@ impl PlIcpParams {
     /// Checks every value against its declared range; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
         qicp_matchers::params::check_section("matcher.plicp", self, PlIcpAlgorithm::PARAMETERS)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use qicp_core::testdata::{SplitMix, SyntheticWorld};
+    use qicp_core::{Merge, MutualNearest, QuadTree};
+
+    /// One matcher kept across every match, as a pipeline keeps it: its caches must never
+    /// carry a pair's terms from one reference into the next.
+    #[test]
+    fn the_fast_matcher_returns_the_plain_one_s_results_bit_for_bit() {
+        let params = [
+            PlIcpParams::default(),
+            PlIcpParams {
+                outlier_mult: 2.0,
+                tangent_weight: 0.0,
+                ..PlIcpParams::default()
+            },
+            PlIcpParams {
+                max_normal_angle_deg: 0.0,
+                gate_sigmas: 3.0,
+                ..PlIcpParams::default()
+            },
+        ];
+        let mut rng = SplitMix::new(3);
+        let mut compared = 0;
+        for (k, params) in params.iter().enumerate() {
+            let icp = PlIcpAlgorithm::icp_defaults();
+            let mut fast = PlIcp::<MutualNearest<QuadTree>>::new(icp, *params);
+            let mut plain = PlIcp::<MutualNearest<QuadTree>>::new(icp, *params);
+            plain.plain = true;
+            for world in [
+                SyntheticWorld::room(),
+                SyntheticWorld::corridor(),
+                SyntheticWorld::posts(),
+            ] {
+                for round in 0..12 {
+                    let at = Pose2::new(
+                        rng.range(-0.5, 0.5),
+                        rng.range(-0.5, 0.5),
+                        rng.range(-3.0, 3.0),
+                    );
+                    // A reference of one scan, or a map of several merged.
+                    let mut reference = Reference::new(QuadTree::default());
+                    let scans = if round % 2 == 0 { 1 } else { 4 };
+                    for s in 0..scans {
+                        let from =
+                            at * Pose2::new(0.1 * s as f64, 0.05 * s as f64, 0.02 * s as f64);
+                        let merge = (s > 0).then(|| Merge::spacing(0.02));
+                        reference
+                            .insert_scan(&world.scan(&from, 0.01, rng.next_u64()), &from, merge)
+                            .expect("finite points");
+                    }
+                    let truth = at
+                        * Pose2::new(
+                            rng.range(-0.3, 0.3),
+                            rng.range(-0.3, 0.3),
+                            rng.range(-0.2, 0.2),
+                        );
+                    let scan = world.scan(&truth, 0.01, rng.next_u64());
+                    let guess = truth
+                        * Pose2::new(
+                            rng.range(-0.2, 0.2),
+                            rng.range(-0.2, 0.2),
+                            rng.range(-0.1, 0.1),
+                        );
+                    let prior = (round % 3 == 0)
+                        .then(|| Matrix3::from_diagonal(&Vector3::new(100.0, 100.0, 400.0)));
+                    let a = fast.match_with_prior(&reference, &scan, guess, prior);
+                    let b = plain.match_with_prior(&reference, &scan, guess, prior);
+                    assert_eq!(
+                        format!("{a:?}"),
+                        format!("{b:?}"),
+                        "params {k}, round {round}"
+                    );
+                    compared += usize::from(a.fallback.is_none());
+                }
+            }
+        }
+        assert!(compared > 80, "{compared} matches compared");
     }
 }
