@@ -219,7 +219,7 @@ struct CachedTerms {
 
 /// The terms of `pair` in call `call`, from `cache` (by scan point) when the scan point formed
 /// the same pair before in this call.
-#[inline]
+#[inline(always)]
 fn cached_terms<'c, I: SpatialIndex>(
     cache: &'c mut [CachedTerms],
     call: u32,
@@ -231,15 +231,27 @@ fn cached_terms<'c, I: SpatialIndex>(
     let key = (u64::from(call) << 32) | u64::from(pair.reference);
     let slot = &mut cache[pair.scan as usize];
     if slot.key != key {
-        let w = weight(params, reference, pair.reference);
-        let q = &reference.index().points()[pair.reference as usize];
-        let w = [w[(0, 0)], w[(0, 1)], w[(1, 1)]];
-        *slot = CachedTerms {
-            key,
-            terms: SymmetricSums::terms(&local[pair.scan as usize], q, &w),
-        };
+        *slot = fresh_terms(key, params, reference, local, pair);
     }
     &slot.terms
+}
+
+/// The entry of `pair` under `key` for [`cached_terms`], out of its hot loop.
+#[inline(never)]
+fn fresh_terms<I: SpatialIndex>(
+    key: u64,
+    params: &PlIcpParams,
+    reference: &Reference<I>,
+    local: &[Point2<f64>],
+    pair: &Pair,
+) -> CachedTerms {
+    let w = weight(params, reference, pair.reference);
+    let q = &reference.index().points()[pair.reference as usize];
+    let w = [w[(0, 0)], w[(0, 1)], w[(1, 1)]];
+    CachedTerms {
+        key,
+        terms: SymmetricSums::terms(&local[pair.scan as usize], q, &w),
+    }
 }
 
 impl<C: CorrespondenceMetric> PlIcp<C> {
@@ -466,11 +478,18 @@ impl<C: CorrespondenceMetric> PlIcp<C> {
         let rot = pose.rotation();
         let info = reference.info();
         let normals = &self.normals;
-        self.pairs.retain(|p| {
+        // `retain` by hand: its per-pair closure call cost more than the test.
+        let mut kept = 0;
+        for i in 0..self.pairs.len() {
+            let p = self.pairs[i];
             let a = info[p.reference as usize].normal;
             let b = normals[p.scan as usize];
-            a == Vector2::zeros() || b == Vector2::zeros() || a.dot(&(rot * b)) >= cos_max
-        });
+            if a == Vector2::zeros() || b == Vector2::zeros() || a.dot(&(rot * b)) >= cos_max {
+                self.pairs[kept] = p;
+                kept += 1;
+            }
+        }
+        self.pairs.truncate(kept);
     }
 
     /// Drops the pairs whose point-to-line distance exceeds `outlier_mult` times the
