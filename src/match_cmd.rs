@@ -275,7 +275,7 @@ pub fn listing(registry: &qicp_matchers::Registry) -> Result<String> {
         writeln!(out, "  {} ({}-): {}", i.name(), i.prefix(), i.summary())?;
     }
     writeln!(out, "references ([matcher] reference = NAME):")?;
-    for r in qicp_matchers::ReferenceKind::ALL {
+    for r in registry.references() {
         writeln!(out, "  {}: {}", r.name(), r.summary())?;
     }
     writeln!(out, "names (--matcher NAME, [matcher] kind = NAME):")?;

@@ -21,7 +21,7 @@ use crate::icp::IcpParams;
 use crate::idc::Idc;
 use crate::params::{Param, Range, check_section, parse_section, to_table};
 use crate::pipeline::{MotionModel, Odometry, Pipeline, Relevance};
-use crate::registry::{Assembly, ErasedAlgorithm, IndexEntry, ReferenceKind, Registry};
+use crate::registry::{Assembly, ErasedAlgorithm, IndexEntry, ReferenceEntry, Registry};
 use crate::validation::ValidationParams;
 use crate::wsm::Wsm;
 use qicp_core::{KdTree, LaserNoise, MutualNearest, QuadTree};
@@ -104,7 +104,7 @@ impl std::str::FromStr for MatcherKind {
 pub struct MatcherConfig {
     pub(crate) algorithm: Arc<dyn ErasedAlgorithm>,
     /// Which scans the matcher is matched against.
-    pub reference: ReferenceKind,
+    pub reference: ReferenceEntry,
     pub(crate) index: IndexEntry,
     /// Iteration parameters.
     pub icp: IcpParams,
@@ -264,7 +264,7 @@ impl MatcherConfig {
     pub(crate) fn from_axes(
         registry: &Registry,
         algorithm: &str,
-        reference: ReferenceKind,
+        reference: ReferenceEntry,
         index: &str,
     ) -> Result<Self, ConfigError> {
         Self::assemble(
@@ -317,7 +317,7 @@ impl MatcherConfig {
             }
             (None, Some(a)) => (
                 a,
-                ReferenceKind::from_name(reference.as_deref().unwrap_or("map"))?,
+                registry.reference(reference.as_deref().unwrap_or(crate::registry::MAP))?,
                 index.unwrap_or_else(|| "quadtree".into()),
             ),
             (None, None) => {
@@ -340,7 +340,7 @@ impl MatcherConfig {
     /// Builds a config from the keys of `[matcher]` left after the axes; refuses leftovers.
     pub(crate) fn assemble(
         algorithm: Arc<dyn ErasedAlgorithm>,
-        reference: ReferenceKind,
+        reference: ReferenceEntry,
         index: IndexEntry,
         mut table: toml::Table,
         is_algorithm: &dyn Fn(&str) -> bool,
@@ -410,7 +410,7 @@ impl MatcherConfig {
     /// The composed name, e.g. `"q-wsm"` (see [`Registry::compose`]).
     #[must_use]
     pub fn kind(&self) -> String {
-        Registry::compose(self.algorithm.name(), self.reference, &self.index)
+        Registry::compose(self.algorithm.name(), &self.reference, &self.index)
     }
 
     /// The algorithm's registry name, e.g. `"wsm"`.
@@ -428,7 +428,7 @@ impl MatcherConfig {
     /// This config with its reference policy set to `reference` (all else kept): the
     /// scan-to-scan twin of a boosted matcher and back.
     #[must_use]
-    pub fn with_reference(&self, reference: ReferenceKind) -> Self {
+    pub fn with_reference(&self, reference: ReferenceEntry) -> Self {
         let mut c = self.clone();
         c.reference = reference;
         c
@@ -510,7 +510,7 @@ impl MatcherConfig {
         let mut c = self.clone();
         c.fill_defaults();
         let kind = c.kind();
-        let policy = c.reference.policy(c.relevance);
+        let policy = c.reference.policy(&c.relevance);
         c.algorithm.build(
             &c.section,
             Assembly {

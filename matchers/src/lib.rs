@@ -11,10 +11,11 @@
 //! - around Alg. 1, each switchable: [`Validator`] checks a match before it enters the map
 //!   ([`validation`]), and [`CorrelativeSearch`] (Olson 2009) re-matches a suspect scan from the
 //!   best pose of a window around the prediction ([`correlative`]);
-//! - [`Registry`]: algorithms and indexes by name, composed by a [`MatcherConfig`] (from
-//!   TOML or a name such as `"q-wsm"`) into a `Box<dyn Odometry>`. Another crate adds its
-//!   matcher with [`Registry::register`] (see `qicp-plicp`); its parameters are declared
-//!   once ([`Param`]) and checked like the built-in ones.
+//! - [`Registry`]: algorithms, indexes and reference policies by name, composed by a
+//!   [`MatcherConfig`] (from TOML or a name such as `"q-wsm"`) into a `Box<dyn Odometry>`.
+//!   Another crate adds its matcher with [`Registry::register`] (see `qicp-plicp`), its
+//!   parameters declared once ([`Param`]) and checked like the built-in ones, and its reference
+//!   policy ([`ReferencePolicy`]) with [`Registry::register_reference`].
 //!
 //! ```
 //! use qicp_core::{Pose2, Record, testdata::SyntheticWorld};
@@ -40,6 +41,7 @@ pub mod idc;
 pub mod lsq;
 pub mod params;
 pub mod pipeline;
+pub mod policy;
 pub mod registry;
 mod steering;
 pub mod validation;
@@ -53,6 +55,7 @@ pub use icp::IcpParams;
 pub use idc::{Idc, IdcAlgorithm, IdcParams};
 pub use params::{Param, Range};
 pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance};
-pub use registry::{Algorithm, AnyIndex, IndexEntry, Metric, ReferenceKind, Registry};
+pub use policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
+pub use registry::{Algorithm, AnyIndex, IndexEntry, Metric, ReferenceEntry, Registry};
 pub use validation::{Check, Fit, Level, ValidationParams, Validator};
 pub use wsm::{Wsm, WsmAlgorithm, WsmParams};

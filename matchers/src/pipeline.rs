@@ -4,13 +4,13 @@
 use crate::ConfigError;
 use crate::correlative::{CorrelativeParams, CorrelativeSearch};
 use crate::icp::non_negative;
+use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 use crate::validation::{Check, Fit, ValidationParams, Validator, is_poor};
 use qicp_core::{
     Fallback, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
     ScanMatcher, SpatialIndex,
 };
 use serde::{Deserialize, Serialize};
-use std::collections::VecDeque;
 
 /// Alg. 1's relevance thresholds (TOML section `[matcher.relevance]`): which scans enter
 /// the reference. Boosted pipelines add relevant scans to the map; incremental ones replace
@@ -136,7 +136,12 @@ impl Relevance {
     /// Whether a scan at `pose` shows enough the `map` does not hold yet (see
     /// [`Relevance::min_novelty`]).
     #[must_use]
-    pub fn is_novel<I: SpatialIndex>(&self, map: &I, scan: &qicp_core::Scan, pose: &Pose2) -> bool {
+    pub fn is_novel<I: SpatialIndex + ?Sized>(
+        &self,
+        map: &I,
+        scan: &qicp_core::Scan,
+        pose: &Pose2,
+    ) -> bool {
         let points = scan.points();
         if self.min_novelty <= 0.0 || map.is_empty() || points.is_empty() {
             return true;
@@ -257,13 +262,44 @@ pub trait Odometry: Send + std::fmt::Debug {
     fn reference_points(&self) -> &[Point2<f64>];
 }
 
-/// How the reference is kept.
+/// The built-in reference policies, for [`Pipeline::new`] (any [`ReferencePolicy`] will do).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Policy {
-    /// Scan-to-scan: the reference is the latest relevant scan.
+    /// Scan-to-scan: the reference is the latest relevant scan ([`ScanPolicy`]).
     Incremental(Relevance),
-    /// Scan-to-map (paper Alg. 1): the reference is the map of all relevant scans.
+    /// Scan-to-map (paper Alg. 1): the reference is the map of all relevant scans
+    /// ([`MapPolicy`]).
     Boosted(Relevance),
+}
+
+impl From<Policy> for Box<dyn ReferencePolicy> {
+    fn from(policy: Policy) -> Self {
+        match policy {
+            Policy::Incremental(relevance) => Box::new(ScanPolicy::new(relevance)),
+            Policy::Boosted(relevance) => Box::new(MapPolicy::new(relevance)),
+        }
+    }
+}
+
+/// The pipeline's reference as its policy sees it.
+struct Store<'a, I> {
+    reference: &'a mut Reference<I>,
+    frame: &'a mut Pose2,
+}
+
+impl<I: SpatialIndex> ReferenceStore for Store<'_, I> {
+    fn index(&self) -> &dyn SpatialIndex {
+        self.reference.index()
+    }
+    fn clear(&mut self) {
+        self.reference.clear();
+    }
+    fn insert_scan(&mut self, scan: &qicp_core::Scan, pose: &Pose2, merge: Option<Merge>) -> bool {
+        self.reference.insert_scan(scan, pose, merge).is_ok()
+    }
+    fn set_frame(&mut self, frame: Pose2) {
+        *self.frame = frame;
+    }
 }
 
 /// A matcher `M` with a reference held in index `I`.
@@ -272,18 +308,13 @@ pub struct Pipeline<M, I> {
     kind: String,
     matcher: M,
     reference: Reference<I>,
-    policy: Policy,
+    policy: Box<dyn ReferencePolicy>,
     motion: MotionModel,
-    /// Pose of the reference frame in the world: the previous scan's laser pose
-    /// (incremental), the identity (boosted).
+    /// Pose of the reference frame in the world, as the policy sets it: the identity for a
+    /// map, the reference scan's laser pose scan to scan.
     reference_frame: Pose2,
     /// Odometry and estimated laser pose of the previous record.
     last: Option<(Pose2, Pose2)>,
-    /// Laser pose of the last scan inserted into the map.
-    last_inserted: Option<Pose2>,
-    /// The scans of a windowed map ([`Relevance::window_scans`]) and their laser poses,
-    /// oldest first.
-    window: VecDeque<(qicp_core::Scan, Pose2)>,
     /// The check before insertion, and its search.
     validator: Validator,
     search: CorrelativeSearch,
@@ -300,19 +331,17 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         kind: impl Into<String>,
         matcher: M,
         index: I,
-        policy: Policy,
+        policy: impl Into<Box<dyn ReferencePolicy>>,
         noise: LaserNoise,
     ) -> Self {
         Self {
             kind: kind.into(),
             matcher,
             reference: Reference::with_noise(index, noise),
-            policy,
+            policy: policy.into(),
             motion: MotionModel::default(),
             reference_frame: Pose2::IDENTITY,
             last: None,
-            last_inserted: None,
-            window: VecDeque::new(),
             validator: Validator::new(ValidationParams::default()),
             search: CorrelativeSearch::new(CorrelativeParams::default()),
         }
@@ -407,68 +436,17 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     }
 
     fn update_reference(&mut self, record: &Record, laser: &Pose2, result: &MatchResult) -> bool {
-        let matched = result.fallback.is_none();
-        let enough = record.scan.valid_count() >= 3;
-        let (Policy::Incremental(relevance) | Policy::Boosted(relevance)) = self.policy;
-        let relevant = self
-            .last_inserted
-            .is_none_or(|last| relevance.is_relevant(&last.between(laser)));
-        let ok = match self.policy {
-            Policy::Incremental(_) => {
-                // A scan that could not be matched against the reference replaces it: the
-                // robot has left what the old one saw.
-                if !(enough && (relevant || !matched)) {
-                    return false;
-                }
-                self.reference.clear();
-                self.reference_frame = *laser;
-                self.reference
-                    .insert_scan(&record.scan, &Pose2::IDENTITY, None)
-                    .is_ok()
-            }
-            Policy::Boosted(_) => {
-                // A relevant scan enters the map even when it could not be matched for lack of
-                // correspondences: it sees territory the map does not hold yet, and its
-                // odometry pose is the best estimate there is. Without it the map would stop
-                // growing and every later scan would fall back too.
-                let trusted = matched
-                    || matches!(
-                        result.fallback,
-                        Some(Fallback::TooFewCorrespondences { .. } | Fallback::EmptyReference)
-                    );
-                if !(enough && relevant && trusted) {
-                    return false;
-                }
-                if !relevance.is_novel(self.reference.index(), &record.scan, laser) {
-                    return false;
-                }
-                // paper Alg. 1: insert all scan points of s_global into Q_t
-                let merge =
-                    Some(relevance.merge(self.matcher.map_resolution(self.reference.noise())));
-                let inserted = self
-                    .reference
-                    .insert_scan(&record.scan, laser, merge)
-                    .is_ok();
-                if inserted && relevance.window_scans > 0 {
-                    self.window.push_back((record.scan.clone(), *laser));
-                    let keep = relevance.window_scans;
-                    if self.window.len() >= keep + keep.div_ceil(2) {
-                        // Rebuilt from the newest scans, merged in their order as they were.
-                        self.window.drain(..self.window.len() - keep);
-                        self.reference.clear();
-                        for (scan, pose) in &self.window {
-                            // These points were finite when first inserted.
-                            let _ = self.reference.insert_scan(scan, pose, merge);
-                        }
-                    }
-                }
-                inserted
-            }
+        let matched = Matched {
+            scan: &record.scan,
+            laser: *laser,
+            result,
+            map_resolution: self.matcher.map_resolution(self.reference.noise()),
         };
-        if ok {
-            self.last_inserted = Some(*laser);
-        }
-        ok
+        let mut store = Store {
+            reference: &mut self.reference,
+            frame: &mut self.reference_frame,
+        };
+        self.policy.update(&mut store, &matched)
     }
 }
 
@@ -495,7 +473,7 @@ where
         // The prior's x-y block is isotropic, so it holds in the reference frame unrotated.
         let prior = self.motion.information(&step);
         let (result, mut check) = self.match_checked(&record.scan, guess, prior);
-        let boosted = matches!(self.policy, Policy::Boosted(_));
+        let boosted = self.policy.is_map();
         // A refused match stays out of a map, and so does one that odometry contradicts
         // until a match agrees again. A scan-to-scan reference is replaced all the same: there
         // is no map to protect, and an older reference overlaps less.

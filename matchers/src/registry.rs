@@ -21,7 +21,9 @@ use crate::config::{ConfigError, MatcherConfig};
 use crate::correlative::CorrelativeParams;
 use crate::icp::IcpParams;
 use crate::params::{Param, check_section, parse_section, to_table};
-use crate::pipeline::{MotionModel, Odometry, Pipeline, Policy, Relevance};
+use crate::pipeline::{MotionModel, Odometry, Pipeline, Relevance};
+pub use crate::policy::{MAP, ReferenceEntry, SCAN};
+use crate::policy::{ReferencePolicy, is_builtin};
 use crate::validation::ValidationParams;
 use qicp_core::{
     BruteForce, CorrespondenceMetric, KdTree, LaserNoise, MutualNearest, QuadTree, ScanMatcher,
@@ -161,66 +163,12 @@ enum IndexMaker {
     Dynamic(IndexFactory),
 }
 
-/// Which scans the matcher is matched against.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum ReferenceKind {
-    /// The map of every relevant scan (paper Alg. 1): the boosted matchers.
-    Map,
-    /// The latest relevant scan: classic scan-to-scan matching.
-    Scan,
-}
-
-impl ReferenceKind {
-    /// Every reference policy, with its name.
-    pub const ALL: [ReferenceKind; 2] = [ReferenceKind::Map, ReferenceKind::Scan];
-
-    /// Registry name.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            ReferenceKind::Map => "map",
-            ReferenceKind::Scan => "scan",
-        }
-    }
-
-    /// One line for listings.
-    #[must_use]
-    pub fn summary(self) -> &'static str {
-        match self {
-            ReferenceKind::Map => "against a map of every relevant scan (paper Alg. 1)",
-            ReferenceKind::Scan => "against the latest relevant scan (scan to scan)",
-        }
-    }
-
-    /// The policy with these relevance thresholds.
-    #[must_use]
-    pub fn policy(self, relevance: Relevance) -> Policy {
-        match self {
-            ReferenceKind::Map => Policy::Boosted(relevance),
-            ReferenceKind::Scan => Policy::Incremental(relevance),
-        }
-    }
-
-    /// The policy named `name`.
-    pub fn from_name(name: &str) -> Result<Self, ConfigError> {
-        Self::ALL
-            .into_iter()
-            .find(|r| r.name() == name)
-            .ok_or_else(|| {
-                ConfigError::invalid(
-                    "matcher.reference",
-                    format!("unknown reference `{name}`; known: map, scan"),
-                )
-            })
-    }
-}
-
 /// What a pipeline is built from: everything but the algorithm and the index.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub(crate) struct Assembly<'a> {
     pub kind: String,
     pub icp: IcpParams,
-    pub policy: Policy,
+    pub policy: Box<dyn ReferencePolicy>,
     pub motion: MotionModel,
     pub validation: ValidationParams,
     pub correlative: CorrelativeParams,
@@ -335,6 +283,7 @@ impl<A: Algorithm> ErasedAlgorithm for Registered<A> {
 pub struct Registry {
     algorithms: Vec<Arc<dyn ErasedAlgorithm>>,
     indexes: Vec<IndexEntry>,
+    references: Vec<ReferenceEntry>,
 }
 
 impl Debug for Registry {
@@ -342,6 +291,7 @@ impl Debug for Registry {
         f.debug_struct("Registry")
             .field("algorithms", &self.algorithm_names())
             .field("indexes", &self.indexes)
+            .field("references", &self.references)
             .finish()
     }
 }
@@ -368,12 +318,14 @@ static BUILTIN: LazyLock<Registry> = LazyLock::new(|| {
         "a plain list searched linearly: the oracle",
         || Box::new(BruteForce::default()),
     );
+    r.references.push(ReferenceEntry::map());
+    r.references.push(ReferenceEntry::scan());
     r
 });
 
 impl Registry {
-    /// The built-in algorithms (`idc`, `wsm`) and indexes (`quadtree`, `kdtree`,
-    /// `brute-force`).
+    /// The built-in algorithms (`idc`, `wsm`), indexes (`quadtree`, `kdtree`, `brute-force`)
+    /// and reference policies (`map`, `scan`).
     #[must_use]
     pub fn builtin() -> Self {
         BUILTIN.clone()
@@ -404,6 +356,40 @@ impl Registry {
             make: IndexMaker::Dynamic(Arc::new(make)),
         });
         self
+    }
+
+    /// Registers a reference policy made by `make` (from the config's `[matcher.relevance]`)
+    /// under `name`, replacing one of that name. Every algorithm and index can then be matched
+    /// against it: `[matcher] algorithm = "wsm"`, `reference = "<name>"`, or the composed name
+    /// `wsm+<name>` (`wsm+<name>@kdtree` in another index).
+    ///
+    /// Refused: an empty name, one holding `+`, `@` or `-` (composed names use them), and the
+    /// built-in `map` and `scan`, whose composed names are the presets.
+    pub fn register_reference(
+        &mut self,
+        name: &'static str,
+        summary: &'static str,
+        make: impl Fn(&Relevance) -> Box<dyn ReferencePolicy> + Send + Sync + 'static,
+    ) -> Result<&mut Self, ConfigError> {
+        if name.is_empty() || name.contains(['+', '@', '-']) || is_builtin(name) {
+            return Err(ConfigError::invalid(
+                "matcher.reference",
+                format!(
+                    "cannot register `{name}`: a policy's name is not empty, holds no `+`, `@` \
+                     or `-`, and is not a built-in one ({MAP}, {SCAN})"
+                ),
+            ));
+        }
+        self.references.retain(|r| r.name() != name);
+        self.references
+            .push(ReferenceEntry::new(name, summary, make));
+        Ok(self)
+    }
+
+    /// The registered reference policies.
+    #[must_use]
+    pub fn references(&self) -> &[ReferenceEntry] {
+        &self.references
     }
 
     /// Names of the registered algorithms, in registration order.
@@ -441,7 +427,34 @@ impl Registry {
                     .map(|a| format!("{}-{}", i.prefix, a.name())),
             );
         }
+        for r in self.references.iter().filter(|r| !is_builtin(r.name())) {
+            out.extend(
+                self.algorithms
+                    .iter()
+                    .map(|a| format!("{}+{}", a.name(), r.name())),
+            );
+        }
         out
+    }
+
+    pub(crate) fn reference(&self, name: &str) -> Result<ReferenceEntry, ConfigError> {
+        self.references
+            .iter()
+            .find(|r| r.name() == name)
+            .cloned()
+            .ok_or_else(|| {
+                ConfigError::invalid(
+                    "matcher.reference",
+                    format!(
+                        "unknown reference `{name}`; known: {}",
+                        self.references
+                            .iter()
+                            .map(ReferenceEntry::name)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })
     }
 
     pub(crate) fn algorithm(&self, name: &str) -> Result<Arc<dyn ErasedAlgorithm>, ConfigError> {
@@ -485,18 +498,31 @@ impl Registry {
     }
 
     /// The axes of a composed name: `wsm` → (wsm, scan, quadtree), `kd-wsm` → (wsm, map, kdtree),
-    /// `wsm@kdtree` → (wsm, scan, kdtree).
+    /// `wsm@kdtree` → (wsm, scan, kdtree), `wsm+window` → (wsm, window, quadtree) and
+    /// `wsm+window@kdtree` → (wsm, window, kdtree) for a registered policy `window`.
     pub fn resolve(
         &self,
         name: &str,
-    ) -> Result<(&'static str, ReferenceKind, &'static str), ConfigError> {
+    ) -> Result<(&'static str, ReferenceEntry, &'static str), ConfigError> {
         if let Ok(a) = self.algorithm(name) {
-            return Ok((a.name(), ReferenceKind::Scan, "quadtree"));
+            return Ok((a.name(), ReferenceEntry::scan(), "quadtree"));
         }
-        if let Some((algorithm, index)) = name.split_once('@')
-            && let (Ok(a), Ok(i)) = (self.algorithm(algorithm), self.index(index))
-        {
-            return Ok((a.name(), ReferenceKind::Scan, i.name));
+        let (head, index) = match name.split_once('@') {
+            Some((head, index)) => (head, self.index(index).ok()),
+            None => (name, self.index("quadtree").ok()),
+        };
+        if let Some(i) = index {
+            if let Some((algorithm, reference)) = head.split_once('+')
+                && let (Ok(a), Ok(r)) = (self.algorithm(algorithm), self.reference(reference))
+                && !is_builtin(r.name())
+            {
+                return Ok((a.name(), r, i.name));
+            }
+            if name.contains('@')
+                && let Ok(a) = self.algorithm(head)
+            {
+                return Ok((a.name(), ReferenceEntry::scan(), i.name));
+            }
         }
         for i in &self.indexes {
             if let Some(rest) = name
@@ -504,7 +530,7 @@ impl Registry {
                 .and_then(|r| r.strip_prefix('-'))
                 && let Ok(a) = self.algorithm(rest)
             {
-                return Ok((a.name(), ReferenceKind::Map, i.name));
+                return Ok((a.name(), ReferenceEntry::map(), i.name));
             }
         }
         Err(ConfigError::invalid(
@@ -514,13 +540,20 @@ impl Registry {
     }
 
     /// The name composed of three axes: the inverse of [`resolve`](Self::resolve). A
-    /// scan-to-scan matcher over an index other than the quad tree is `<algorithm>@<index>`.
+    /// scan-to-scan matcher over an index other than the quad tree is `<algorithm>@<index>`;
+    /// a registered policy other than `map` and `scan` is `<algorithm>+<reference>`, with
+    /// `@<index>` beyond the quad tree.
     #[must_use]
-    pub fn compose(algorithm: &str, reference: ReferenceKind, index: &IndexEntry) -> String {
-        match reference {
-            ReferenceKind::Map => format!("{}-{algorithm}", index.prefix),
-            ReferenceKind::Scan if index.name == "quadtree" => algorithm.to_string(),
-            ReferenceKind::Scan => format!("{algorithm}@{}", index.name),
+    pub fn compose(algorithm: &str, reference: &ReferenceEntry, index: &IndexEntry) -> String {
+        let at = if index.name == "quadtree" {
+            String::new()
+        } else {
+            format!("@{}", index.name)
+        };
+        match reference.name() {
+            MAP => format!("{}-{algorithm}", index.prefix),
+            SCAN => format!("{algorithm}{at}"),
+            other => format!("{algorithm}+{other}{at}"),
         }
     }
 

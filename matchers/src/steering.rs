@@ -101,7 +101,7 @@ impl MatcherConfig {
         // Leftover keys cannot appear: the table is this config's own.
         Self::assemble(
             self.algorithm.clone(),
-            self.reference,
+            self.reference.clone(),
             self.index.clone(),
             table,
             &|_| false,

@@ -53,7 +53,7 @@ use crate::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_ru
 use crate::plots::{self, Panel, PathSeries, ScanSeries};
 use anyhow::{Context, Result};
 use qicp_core::{Pose2, Record};
-use qicp_matchers::{MatcherConfig, ReferenceKind};
+use qicp_matchers::MatcherConfig;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;

@@ -204,7 +204,7 @@ pub(super) fn draw_pictures(
             color: plots::PALETTE[k % plots::PALETTE.len()],
             width: 2,
             // kd-tree kinds often coincide with their quad-tree twins: dashed, both show.
-            dashed: o.config.reference == ReferenceKind::Map && o.config.index() != "quadtree",
+            dashed: o.config.reference.is_map() && o.config.index() != "quadtree",
         });
     }
     let title = format!("Robot paths, {} scans{aligned_note}", source.scans());
@@ -218,12 +218,11 @@ pub(super) fn draw_pictures(
     // The quad-tree form first, as the paper draws it.
     let pairs: Vec<(&MatcherOutcome, &MatcherOutcome)> = outcomes
         .iter()
-        .filter(|i| i.config.reference == ReferenceKind::Scan)
+        .filter(|i| i.config.reference.name() == qicp_matchers::registry::SCAN)
         .filter_map(|i| {
             let twins = || {
                 outcomes.iter().filter(|b| {
-                    b.config.reference == ReferenceKind::Map
-                        && b.config.algorithm() == i.config.algorithm()
+                    b.config.reference.is_map() && b.config.algorithm() == i.config.algorithm()
                 })
             };
             let b = twins()

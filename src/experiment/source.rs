@@ -346,7 +346,10 @@ impl MatcherOutcome {
 /// The kind of the scan-to-scan twin of a boosted matcher (same algorithm), if it is one.
 #[must_use]
 pub fn incremental_of(config: &MatcherConfig) -> Option<String> {
-    (config.reference == ReferenceKind::Map).then(|| config.algorithm().to_string())
+    config
+        .reference
+        .is_map()
+        .then(|| config.algorithm().to_string())
 }
 
 /// Boosted / incremental ratios of every boosted kind whose twin also ran:
