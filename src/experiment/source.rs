@@ -153,7 +153,8 @@ impl Source {
             } => {
                 let changed = || {
                     anyhow::anyhow!(
-                        "{} changed during the run (it held {scans} records when counted);                          every matcher reads the log afresh, so it must stay as it is",
+                        "{} changed during the run (it held {scans} records when counted); \
+                         every matcher reads the log afresh, so it must stay as it is",
                         path.display()
                     )
                 };
@@ -450,5 +451,7 @@ mod tests {
         std::fs::write(&path, log(12)).expect("rewritten");
         let err = count(&source).expect_err("changed").to_string();
         assert!(err.contains("changed during the run"), "{err}");
+        // One sentence, not a source line's indentation in the middle of it.
+        assert!(!err.contains("  "), "{err}");
     }
 }
