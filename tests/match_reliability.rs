@@ -293,13 +293,43 @@ fn stop_when_writing(
     files: usize,
     signal: &str,
 ) -> (Vec<String>, Option<i32>) {
+    stop_when_writing_ignoring(&[], args, dir, files, signal)
+}
+
+/// [`stop_when_writing`] with the signals `ignored` (by name) inherited as ignored, as `nohup`
+/// or a shell's background job leaves them: each is sent first, and the run must go on.
+fn stop_when_writing_ignoring(
+    ignored: &[&str],
+    args: &[&str],
+    dir: &Path,
+    files: usize,
+    signal: &str,
+) -> (Vec<String>, Option<i32>) {
     use std::os::unix::process::ExitStatusExt;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
+    let qicp = env!("CARGO_BIN_EXE_qicp");
+    let mut command = if ignored.is_empty() {
+        Command::new(qicp)
+    } else {
+        // The shell sets them to ignored and becomes qicp (same process).
+        let mut sh = Command::new("sh");
+        sh.arg("-c")
+            .arg(format!("trap '' {}; exec \"$0\" \"$@\"", ignored.join(" ")))
+            .arg(qicp);
+        sh
+    };
+    let mut child = command
         .args(args)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
         .expect("runs qicp");
+    let kill = |signal: &str, pid: u32| {
+        let sent = Command::new("kill")
+            .args([&format!("-{signal}"), &pid.to_string()])
+            .status()
+            .expect("kill");
+        assert!(sent.success());
+    };
     let listing = || -> Vec<String> {
         std::fs::read_dir(dir)
             .map(|d| {
@@ -321,11 +351,15 @@ fn stop_when_writing(
         );
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    let sent = Command::new("kill")
-        .args([&format!("-{signal}"), &child.id().to_string()])
-        .status()
-        .expect("kill");
-    assert!(sent.success());
+    for s in ignored {
+        kill(s, child.id());
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        assert!(
+            child.try_wait().expect("status").is_none(),
+            "qicp ended on SIG{s}, which it inherited as ignored"
+        );
+    }
+    kill(signal, child.id());
     let status = child.wait().expect("status");
     (listing(), status.signal())
 }
@@ -363,5 +397,22 @@ fn a_run_stopped_by_a_signal_leaves_no_temporary_file() {
     ];
     let (left, signal) = stop_when_writing(&args, &trajectories, 2, "INT");
     assert_eq!(signal, Some(2));
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+/// Under `nohup` (SIGHUP ignored) or as a shell's background job (SIGINT ignored) a run must
+/// not die of those signals because qicp watches for them to remove its temporary files.
+#[test]
+fn signals_inherited_as_ignored_stay_ignored() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let intel = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/intel/intel.clf.bz2");
+    let args = ["match", s(&intel), "--matcher", "wsm", "--out", s(&out)];
+    let (left, signal) = stop_when_writing_ignoring(&["HUP", "INT"], &args, &out, 2, "TERM");
+    assert_eq!(
+        signal,
+        Some(15),
+        "ended by SIGTERM, not by SIGHUP or SIGINT"
+    );
     assert!(left.is_empty(), "left behind: {left:?}");
 }

@@ -4,8 +4,9 @@
 //!
 //! - [`Idc`]: Iterative Dual Correspondence (Lu & Milios 1997);
 //! - [`Wsm`]: Weighted Scan Matching (Pfister et al. 2002);
-//! - [`Pipeline`]: a matcher with a reference policy, scan-to-scan against the latest relevant scan ([`Policy::Incremental`])
-//!   or boosted against a map of every relevant scan ([`Policy::Boosted`], paper Alg. 1) with
+//! - [`Pipeline`]: a matcher with a reference policy ([`ReferencePolicy`]), scan-to-scan against
+//!   the latest relevant scan ([`ScanPolicy`], [`Policy::Incremental`]) or boosted against a map
+//!   of every relevant scan ([`MapPolicy`], [`Policy::Boosted`], paper Alg. 1) with
 //!   mutual-nearest correspondences (paper Alg. 2). The named compositions are type aliases:
 //!   [`QIdc`], [`QWsm`], [`KdIdc`], [`KdWsm`];
 //! - around Alg. 1, each switchable: [`Validator`] checks a match before it enters the map

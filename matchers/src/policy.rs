@@ -20,7 +20,9 @@ pub trait ReferencePolicy: Send + Debug {
     /// True when the reference is a map in the world frame that later scans are matched
     /// against for good: the pipeline then keeps a refused match, and one odometry
     /// contradicts, out of it (see [`crate::validation`]), and reports the policy as boosted.
-    /// False for a reference that is replaced as the robot moves on (scan to scan).
+    /// False for a reference that is replaced as the robot moves on (scan to scan). A
+    /// constant of the policy: the registry asks it once, of a policy made with the default
+    /// [`Relevance`], to tell boosted matchers from their scan-to-scan twins.
     fn is_map(&self) -> bool;
 
     /// Updates `reference` with the scan just matched; returns whether the scan entered it.
@@ -247,6 +249,7 @@ impl Debug for ReferenceEntry {
     }
 }
 
+/// Entries are equal when their names are: a registry holds one policy per name.
 impl PartialEq for ReferenceEntry {
     fn eq(&self, other: &Self) -> bool {
         self.name == other.name

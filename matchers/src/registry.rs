@@ -6,7 +6,8 @@
 //! rule for every registered algorithm `A`: `A` matches scan to scan; `<prefix>-A` matches
 //! against a map held in the index of that prefix (`q-` quad tree, `kd-` kd-tree, `bf-` brute
 //! force). So an algorithm registered by another crate gains its boosted forms (`q-plicp`)
-//! without a line of code.
+//! without a line of code. Scan to scan over another index is `A@<index>`; against a
+//! registered reference policy `P` other than `map` and `scan` it is `A+P` (`A+P@<index>`).
 //!
 //! ```
 //! use qicp_matchers::Registry;
@@ -512,7 +513,7 @@ impl Registry {
             None => (name, self.index("quadtree").ok()),
         };
         if let Some(i) = index {
-            if let Some((algorithm, reference)) = head.split_once('+')
+            if let Some((algorithm, reference)) = head.rsplit_once('+')
                 && let (Ok(a), Ok(r)) = (self.algorithm(algorithm), self.reference(reference))
                 && !is_builtin(r.name())
             {
@@ -533,9 +534,17 @@ impl Registry {
                 return Ok((a.name(), ReferenceEntry::map(), i.name));
             }
         }
+        let hint = match name.rsplit_once('+').map(|(a, r)| (a, r.split('@').next())) {
+            Some((a, Some(MAP))) => format!(" (a map is the `<prefix>-` form: q-{a})"),
+            Some((a, Some(SCAN))) => format!(" (scan to scan is the plain name: {a})"),
+            _ => String::new(),
+        };
         Err(ConfigError::invalid(
             "matcher.kind",
-            format!("unknown kind `{name}`; known: {}", self.names().join(", ")),
+            format!(
+                "unknown kind `{name}`{hint}; known: {} (and `<algorithm>@<index>` scan to scan)",
+                self.names().join(", ")
+            ),
         ))
     }
 

@@ -91,7 +91,11 @@ fn a_registered_reference_policy_composes_with_every_algorithm_and_index() {
     );
     // The presets keep their names: a built-in policy is never composed with `+`, nor
     // replaced, and a name that composed names could not parse is refused.
-    assert!(registry.config("wsm+map").is_err());
+    let e = registry
+        .config("wsm+map")
+        .expect_err("a preset's axes")
+        .to_string();
+    assert!(e.contains("q-wsm"), "the error names the preset: {e}");
     let mut other = Registry::builtin();
     for name in ["map", "scan", "", "last-two", "a+b", "a@b"] {
         let e = other

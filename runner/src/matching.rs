@@ -9,7 +9,7 @@ use serde::Serialize;
 use std::io::Write;
 use std::path::Path;
 
-pub use crate::output::{OutputFile, remove_on_signal, write_atomic};
+pub use crate::output::{OutputFile, remove_on_hangup, remove_on_signal, write_atomic};
 use std::time::Instant;
 
 /// Per-scan figures, one row of `matches.csv`.

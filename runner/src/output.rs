@@ -2,7 +2,8 @@
 //! signal.
 //!
 //! An [`OutputFile`] is written under a hidden temporary name beside its path
-//! (`.trajectory.tum.XXXXXX`) and renamed into place by [`OutputFile::commit`]; dropped before
+//! (`.trajectory.XXXXXX.tum`: the extension kept, for writers that choose the format by it)
+//! and renamed into place by [`OutputFile::commit`]; dropped before
 //! (an error, a panic), it removes its temporary file. A signal ends a process without running
 //! drops, so every temporary file is also listed here while it lives, and
 //! [`remove_on_signal`] starts a thread that, on SIGINT, SIGTERM or SIGHUP, removes the listed
@@ -60,12 +61,16 @@ impl OutputFile {
             Some(p) if !p.as_os_str().is_empty() => p,
             _ => Path::new("."),
         };
-        let name = path
-            .file_name()
+        let stem = path
+            .file_stem()
             .map_or_else(|| "out".into(), |n| n.to_string_lossy());
-        let prefix = format!(".{name}.");
+        let prefix = format!(".{stem}.");
+        let suffix = path
+            .extension()
+            .map(|e| format!(".{}", e.to_string_lossy()))
+            .unwrap_or_default();
         let mut builder = tempfile::Builder::new();
-        builder.prefix(&prefix).permissions({
+        builder.prefix(&prefix).suffix(&suffix).permissions({
             use std::os::unix::fs::PermissionsExt;
             std::fs::Permissions::from_mode(0o644)
         });
@@ -90,6 +95,14 @@ impl OutputFile {
     #[must_use]
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The temporary file's path, for a writer that takes a path rather than a `Write` (a
+    /// plotting backend): what it writes there is what [`commit`](Self::commit) renames into
+    /// place. It ends in the final path's extension.
+    #[must_use]
+    pub fn temp_path(&self) -> &Path {
+        self.file.get_ref().path()
     }
 
     /// Flushes the file, syncs its data to disk and renames it to its path.
@@ -144,19 +157,49 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// Starts (once per process) the thread that removes every live [`OutputFile`]'s temporary
 /// file when SIGINT, SIGTERM or SIGHUP arrives, then ends the process by that signal's default
 /// action. Call it at the start of a command that writes outputs; not in a process whose
-/// signals something else handles (an iceoryx2 node stops its loops on them and exits
-/// cleanly, removing its temporary files through their drops).
+/// SIGINT and SIGTERM something else handles (an iceoryx2 node stops its loops on them and
+/// exits cleanly, removing its temporary files through their drops): there, call
+/// [`remove_on_hangup`]. A signal the process inherited as ignored (`nohup`, a shell's
+/// background job) stays ignored.
 pub fn remove_on_signal() -> Result<()> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    watch(&[SIGINT, SIGTERM, SIGHUP])
+}
+
+/// [`remove_on_signal`] for SIGHUP alone, which iceoryx2 does not catch.
+pub fn remove_on_hangup() -> Result<()> {
+    watch(&[signal_hook::consts::SIGHUP])
+}
+
+fn watch(signals: &[i32]) -> Result<()> {
     static STARTED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     STARTED
-        .get_or_init(|| start_signal_thread().map_err(|e| e.to_string()))
+        .get_or_init(|| {
+            let caught: Vec<i32> = signals.iter().copied().filter(|s| !ignored(*s)).collect();
+            start_signal_thread(&caught).map_err(|e| e.to_string())
+        })
         .clone()
         .map_err(|e| anyhow::anyhow!("cannot watch for signals: {e}"))
 }
 
-fn start_signal_thread() -> std::io::Result<()> {
-    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])?;
+/// Whether this process inherited `signal` as ignored (Linux: the `SigIgn` mask of
+/// `/proc/self/status`; elsewhere none is taken for ignored). Catching it would undo `nohup`.
+fn ignored(signal: i32) -> bool {
+    let Ok(status) = std::fs::read_to_string("/proc/self/status") else {
+        return false;
+    };
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigIgn:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_some_and(|mask| (1..=64).contains(&signal) && mask & (1 << (signal - 1)) != 0)
+}
+
+fn start_signal_thread(caught: &[i32]) -> std::io::Result<()> {
+    if caught.is_empty() {
+        return Ok(());
+    }
+    let mut signals = signal_hook::iterator::Signals::new(caught)?;
     std::thread::Builder::new()
         .name("qicp-output-signals".into())
         .spawn(move || {
@@ -164,6 +207,7 @@ fn start_signal_thread() -> std::io::Result<()> {
                 // Held until the process ends: no new temporary file can appear meanwhile.
                 let registry = live();
                 remove_all(&registry);
+                // Ends the process as the signal would have; the exit is a fallback only.
                 let _ = signal_hook::low_level::emulate_default_handler(signal);
                 std::process::exit(128 + signal);
             }
@@ -180,6 +224,23 @@ fn remove_all(registry: &Registry) {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_file_written_through_the_temporary_path_is_what_commit_puts_in_place() {
+        let dir = tempfile::tempdir().expect("dir");
+        let path = dir.path().join("map_q-wsm.png");
+        let out = OutputFile::create(&path).expect("created");
+        assert_eq!(
+            out.temp_path().extension().and_then(|e| e.to_str()),
+            Some("png")
+        );
+        // As a plotting backend does: its own file at that path.
+        std::fs::write(out.temp_path(), b"picture").expect("written by path");
+        assert!(!path.exists());
+        out.commit().expect("committed");
+        assert_eq!(std::fs::read(&path).expect("read"), b"picture");
+        assert!(hidden_files(dir.path()).is_empty());
+    }
+
     use super::*;
 
     fn hidden_files(dir: &Path) -> Vec<String> {
@@ -200,10 +261,10 @@ mod tests {
         out.write_all(b"0 0 0 0 0 0 0 1\n").expect("written");
         assert!(!path.exists());
         assert_eq!(hidden_files(dir.path()).len(), 1);
+        let name = &hidden_files(dir.path())[0];
         assert!(
-            hidden_files(dir.path())[0].starts_with(".trajectory.tum."),
-            "{:?}",
-            hidden_files(dir.path())
+            name.starts_with(".trajectory.") && name.ends_with(".tum"),
+            "{name}"
         );
         out.commit().expect("committed");
         assert_eq!(

@@ -112,7 +112,7 @@ pub(super) fn park_in_process(config: &Path, kind: &str, out: &Path) -> Result<(
     let run = matching.finish();
     write_run(out, &run, &matcher)?;
     let text = serde_json::to_string_pretty(&run.summary)?;
-    std::fs::write(out.join("summary.json"), text).context("writing summary.json")?;
+    crate::matching::write_atomic(&out.join("summary.json"), text.as_bytes())?;
     Ok(())
 }
 

@@ -74,6 +74,11 @@ pub fn run_subscribe(
     args: &SubscribeArgs,
 ) -> Result<()> {
     let topics = topics(&args.prefix, args.iceoryx2_config.as_deref())?;
+    // iceoryx2 ends the loop cleanly on SIGINT and SIGTERM (the outputs are then written);
+    // a hangup would end the process with the temporary files in place.
+    if out.is_some() {
+        crate::matching::remove_on_hangup()?;
+    }
     // The outputs are opened before the first scan: a bad --out fails at once, and rows and
     // poses go to disk as they come (renamed into place at the end), not into memory.
     let mut writer = out.map(RunWriter::create).transpose()?;

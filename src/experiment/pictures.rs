@@ -30,6 +30,15 @@ fn trajectory_of(o: &MatcherOutcome) -> Result<std::borrow::Cow<'_, [Stamped]>> 
     })
 }
 
+/// Draws a picture at `path` through `draw`, which is given the temporary file to draw into:
+/// renamed into place when complete, removed if drawing fails or a signal stops the run.
+fn picture<T>(path: &Path, draw: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
+    let out = crate::matching::OutputFile::create(path)?;
+    let value = draw(out.temp_path()).with_context(|| format!("drawing {}", path.display()))?;
+    out.commit()?;
+    Ok(value)
+}
+
 /// Draws the map of `o` for a log source: the log read afresh, every scan at the matcher's
 /// poses (read back from its trajectory file) into a grid over the bounds gathered while
 /// matching. Memory holds the grid and the path, not the scans.
@@ -63,7 +72,9 @@ fn streamed_map(
         k += 1;
         Ok(())
     })?;
-    Ok(canvas.draw(file, title, &poses, truth_poses)?)
+    picture(file, |to| {
+        Ok(canvas.draw(to, title, &poses, truth_poses)?)
+    })
 }
 
 /// The maps of a held drive, drawn in parallel from the records in memory.
@@ -90,14 +101,16 @@ fn held_maps(
                             .zip(records)
                             .map(|(p, r)| *p * r.laser_offset)
                             .collect();
-                        Ok(plots::occupancy_map(
-                            &out.join(&file),
-                            &title,
-                            &lasers,
-                            scans,
-                            &poses,
-                            truth_poses,
-                        )?)
+                        picture(&out.join(&file), |to| {
+                            Ok(plots::occupancy_map(
+                                to,
+                                &title,
+                                &lasers,
+                                scans,
+                                &poses,
+                                truth_poses,
+                            )?)
+                        })
                     })();
                     (file, r)
                 })
@@ -208,7 +221,9 @@ pub(super) fn draw_pictures(
         });
     }
     let title = format!("Robot paths, {} scans{aligned_note}", source.scans());
-    plots::trajectories(&out.join("trajectories.png"), &title, &series)?;
+    picture(&out.join("trajectories.png"), |to| {
+        Ok(plots::trajectories(to, &title, &series)?)
+    })?;
     pictures.insert(
         "trajectories.png".into(),
         json!("every matcher's path with the ground truth (black) and raw odometry (grey), metres"),
@@ -257,11 +272,13 @@ pub(super) fn draw_pictures(
                 y_cap: None,
             })
             .collect();
-        plots::per_scan(
-            &out.join("residual.png"),
-            "residual correlation distance (mm)",
-            &residual,
-        )?;
+        picture(&out.join("residual.png"), |to| {
+            Ok(plots::per_scan(
+                to,
+                "residual correlation distance (mm)",
+                &residual,
+            )?)
+        })?;
         pictures.insert("residual.png".into(), json!("residual correlation distance per scan (mm), boosted in front of incremental, thick lines the means (paper Fig. 4a-b)"));
         let certainty: Vec<Panel> = pairs
             .iter()
@@ -282,11 +299,13 @@ pub(super) fn draw_pictures(
                 y_cap: Some(3.0),
             })
             .collect();
-        plots::per_scan(
-            &out.join("certainty.png"),
-            "certainty ratio (boosted / incremental)",
-            &certainty,
-        )?;
+        picture(&out.join("certainty.png"), |to| {
+            Ok(plots::per_scan(
+                to,
+                "certainty ratio (boosted / incremental)",
+                &certainty,
+            )?)
+        })?;
         pictures.insert("certainty.png".into(), json!("per scan, the boosted matcher's certainty sqrt(σxx²+σyy²) (covariance diagonal, m²) divided by the incremental one's; dashed: 1, thick: the mean (paper Fig. 4c-d)"));
     }
     Ok(Value::Object(pictures))
