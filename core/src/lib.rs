@@ -36,6 +36,8 @@ pub use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 pub use pose::{Pose2, normalize_angle};
 pub use quadtree::{QuadTree, QuadTreeN};
 pub use record::Record;
-pub use reference::{LaserNoise, Merge, PointInfo, Reference, scan_point_info};
+pub use reference::{
+    LaserNoise, Merge, PointInfo, Reference, scan_point_info, surface_connections, surface_normal,
+};
 pub use result::{Fallback, MatchResult};
 pub use scan::{BeamGeometry, BeamStatus, Scan, ScanError};

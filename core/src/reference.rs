@@ -70,61 +70,101 @@ pub const NEIGHBOUR_GAP_PER_METRE: f64 = 0.15;
 /// Beams on either side of a point used to fit its surface.
 const HALF_WINDOW: usize = 2;
 
+/// `connected[k]` (into `out`): point k and point k + 1 of `scan` lie on one surface, by
+/// [`NEIGHBOUR_GAP`] and [`NEIGHBOUR_GAP_PER_METRE`].
+pub fn surface_connections(scan: &Scan, out: &mut Vec<bool>) {
+    let pts = scan.points();
+    let beams = scan.beam_of_point();
+    out.clear();
+    out.extend((0..pts.len().saturating_sub(1)).map(|k| {
+        let beams_apart = beams[k].abs_diff(beams[k + 1]);
+        let limit = NEIGHBOUR_GAP.max(NEIGHBOUR_GAP_PER_METRE * scan.point_range(k));
+        beams_apart <= 2 && (pts[k] - pts[k + 1]).norm() <= limit * beams_apart as f64
+    }));
+}
+
+/// The surface fitted through point `k` of `pts`: the window of its connected neighbours
+/// within ±2 beams, and the principal-axis line through them.
+struct SurfaceFit<'a> {
+    window: &'a [Point2<f64>],
+    /// Unit normal facing the sensor (at the laser origin).
+    normal: Vector2<f64>,
+    /// Scatter about the window's mean.
+    scatter: (f64, f64, f64),
+}
+
+/// The fit at point `k` (`connected` from [`surface_connections`]); `None` for a point with no
+/// connected neighbour.
+fn surface_fit<'a>(pts: &'a [Point2<f64>], connected: &[bool], k: usize) -> Option<SurfaceFit<'a>> {
+    let mut lo = k;
+    while lo > 0 && k - lo < HALF_WINDOW && connected[lo - 1] {
+        lo -= 1;
+    }
+    let mut hi = k;
+    while hi + 1 < pts.len() && hi - k < HALF_WINDOW && connected[hi] {
+        hi += 1;
+    }
+    if hi == lo {
+        return None;
+    }
+    let window = &pts[lo..=hi];
+    let n = window.len() as f64;
+    let mean = window.iter().fold(Vector2::zeros(), |m, p| m + p.coords) / n;
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in window {
+        let d = p.coords - mean;
+        sxx += d.x * d.x;
+        sxy += d.x * d.y;
+        syy += d.y * d.y;
+    }
+    // Direction of the principal axis of the 2×2 scatter matrix.
+    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let mut normal = Vector2::new(-angle.sin(), angle.cos());
+    // Face the sensor (at the laser origin).
+    if normal.dot(&pts[k].coords) > 0.0 {
+        normal = -normal;
+    }
+    Some(SurfaceFit {
+        window,
+        normal,
+        scatter: (sxx, sxy, syy),
+    })
+}
+
+/// The unit surface normal of point `k` of `pts` ([`PointInfo::normal`]: facing the sensor,
+/// zero for a point with no connected neighbour); `connected` from [`surface_connections`].
+/// For a matcher that needs the scan's normals and not the rest of [`scan_point_info`].
+#[must_use]
+pub fn surface_normal(pts: &[Point2<f64>], connected: &[bool], k: usize) -> Vector2<f64> {
+    surface_fit(pts, connected, k).map_or_else(Vector2::zeros, |f| f.normal)
+}
+
 /// Per-point normals and spacings of one scan, in the laser frame: a line fitted (principal
 /// axis) through the point and its connected neighbours within ±2 beams.
 #[must_use]
 pub fn scan_point_info(scan: &Scan, noise: &LaserNoise) -> Vec<PointInfo> {
     let pts = scan.points();
-    let beams = scan.beam_of_point();
     let step = scan.geometry.angle_increment.abs().max(1e-6);
-    // connected[k]: point k and point k + 1 lie on one surface.
-    let connected: Vec<bool> = (0..pts.len().saturating_sub(1))
-        .map(|k| {
-            let beams_apart = beams[k].abs_diff(beams[k + 1]);
-            let limit = NEIGHBOUR_GAP.max(NEIGHBOUR_GAP_PER_METRE * scan.point_range(k));
-            beams_apart <= 2 && (pts[k] - pts[k + 1]).norm() <= limit * beams_apart as f64
-        })
-        .collect();
+    let mut connected = Vec::new();
+    surface_connections(scan, &mut connected);
     (0..pts.len())
         .map(|k| {
-            let mut lo = k;
-            while lo > 0 && k - lo < HALF_WINDOW && connected[lo - 1] {
-                lo -= 1;
-            }
-            let mut hi = k;
-            while hi + 1 < pts.len() && hi - k < HALF_WINDOW && connected[hi] {
-                hi += 1;
-            }
             let range = scan.point_range(k);
             let covariance = noise.point_covariance(range, scan.point_angle(k));
-            if hi == lo {
+            let Some(fit) = surface_fit(pts, &connected, k) else {
                 return PointInfo {
                     normal: Vector2::zeros(),
                     spacing: (range * step).max(1e-4),
                     covariance,
                     linearity: 0.0,
                 };
-            }
-            let window = &pts[lo..=hi];
+            };
+            let window = fit.window;
             let n = window.len() as f64;
-            let mean = window.iter().fold(Vector2::zeros(), |m, p| m + p.coords) / n;
-            let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-            for p in window {
-                let d = p.coords - mean;
-                sxx += d.x * d.x;
-                sxy += d.x * d.y;
-                syy += d.y * d.y;
-            }
-            // Direction of the principal axis of the 2×2 scatter matrix.
-            let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-            let mut normal = Vector2::new(-angle.sin(), angle.cos());
-            // Face the sensor (at the laser origin).
-            if normal.dot(&pts[k].coords) > 0.0 {
-                normal = -normal;
-            }
+            let (sxx, sxy, syy) = fit.scatter;
             let spacing = (window[window.len() - 1] - window[0]).norm() / (n - 1.0);
             PointInfo {
-                normal,
+                normal: fit.normal,
                 spacing: spacing.max(1e-4),
                 covariance,
                 linearity: linearity(sxx, sxy, syy, window.len(), noise.sigma_range),

@@ -1,57 +1,16 @@
 //! The scan's own surface normals, without the rest of what the reference keeps per point.
 
 use nalgebra::Vector2;
-use qicp_core::Scan;
-use qicp_core::reference::{NEIGHBOUR_GAP, NEIGHBOUR_GAP_PER_METRE};
+use qicp_core::{Scan, surface_connections, surface_normal};
 
-/// Beams on either side of a point used to fit its surface (`qicp_core`'s own).
-const HALF_WINDOW: usize = 2;
-
-/// The normals of [`qicp_core::scan_point_info`], bit for bit, into `out`: the same
-/// connectivity, window and principal-axis fit in the same operations, without the
-/// covariance, spacing and linearity the matcher does not read. `connected` is scratch.
+/// The normals of [`qicp_core::scan_point_info`], bit for bit (the same functions compute
+/// them), into `out`, without the covariance, spacing and linearity the matcher does not
+/// read. `connected` is scratch.
 pub(crate) fn scan_normals(scan: &Scan, connected: &mut Vec<bool>, out: &mut Vec<Vector2<f64>>) {
+    surface_connections(scan, connected);
     let pts = scan.points();
-    let beams = scan.beam_of_point();
-    // connected[k]: point k and point k + 1 lie on one surface.
-    connected.clear();
-    connected.extend((0..pts.len().saturating_sub(1)).map(|k| {
-        let beams_apart = beams[k].abs_diff(beams[k + 1]);
-        let limit = NEIGHBOUR_GAP.max(NEIGHBOUR_GAP_PER_METRE * scan.point_range(k));
-        beams_apart <= 2 && (pts[k] - pts[k + 1]).norm() <= limit * beams_apart as f64
-    }));
     out.clear();
-    out.extend((0..pts.len()).map(|k| {
-        let mut lo = k;
-        while lo > 0 && k - lo < HALF_WINDOW && connected[lo - 1] {
-            lo -= 1;
-        }
-        let mut hi = k;
-        while hi + 1 < pts.len() && hi - k < HALF_WINDOW && connected[hi] {
-            hi += 1;
-        }
-        if hi == lo {
-            return Vector2::zeros();
-        }
-        let window = &pts[lo..=hi];
-        let n = window.len() as f64;
-        let mean = window.iter().fold(Vector2::zeros(), |m, p| m + p.coords) / n;
-        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-        for p in window {
-            let d = p.coords - mean;
-            sxx += d.x * d.x;
-            sxy += d.x * d.y;
-            syy += d.y * d.y;
-        }
-        // Direction of the principal axis of the 2×2 scatter matrix.
-        let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-        let mut normal = Vector2::new(-angle.sin(), angle.cos());
-        // Face the sensor (at the laser origin).
-        if normal.dot(&pts[k].coords) > 0.0 {
-            normal = -normal;
-        }
-        normal
-    }));
+    out.extend((0..pts.len()).map(|k| surface_normal(pts, connected, k)));
 }
 
 #[cfg(test)]
