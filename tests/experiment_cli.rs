@@ -4,6 +4,7 @@
 //! the key named.
 
 mod common_csv;
+use common_csv::lines;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -63,14 +64,6 @@ fn assert_png(path: &Path) {
         path.display(),
         bytes.len()
     );
-}
-
-fn lines(path: &Path) -> Vec<String> {
-    std::fs::read_to_string(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-        .lines()
-        .map(str::to_string)
-        .collect()
 }
 
 #[test]

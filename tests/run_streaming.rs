@@ -4,6 +4,7 @@
 //! and a log with ground truth scores its ATE as `qicp eval ate` does, streamed or held.
 
 mod common_csv;
+use common_csv::lines;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -27,14 +28,6 @@ fn data(file: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/data/intel")
         .join(file)
-}
-
-fn lines(path: &Path) -> Vec<String> {
-    std::fs::read_to_string(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-        .lines()
-        .map(str::to_string)
-        .collect()
 }
 
 fn json(path: &Path) -> serde_json::Value {
