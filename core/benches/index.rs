@@ -1,4 +1,5 @@
-//! Spatial-index benchmarks: building by insertion and nearest-neighbour queries, for the quad
+//! Spatial-index benchmarks: building by insertion, nearest-neighbour queries and a cache
+//! refill (`nearest_and_around`, one pass against two searches), for the quad
 //! tree, the kd-tree and (up to 10k points) brute force, sweeping 1k … 1M points of the
 //! realistic `laser_scans` layout.
 //!
@@ -13,7 +14,7 @@ use criterion::{
     BenchmarkId, Criterion, SamplingMode, Throughput, criterion_group, criterion_main,
 };
 use qicp_core::testdata::laser_scans;
-use qicp_core::{BruteForce, KdTree, Point2, QuadTree, SpatialIndex};
+use qicp_core::{BruteForce, KdTree, Point2, QuadTree, SpatialIndex, nearest_then_around};
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -114,5 +115,40 @@ fn nearest(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, insertion, nearest);
+/// A nearest-neighbour cache's refill: the nearest point within 1 m and every point within its
+/// distance plus 2 cm, as one call (the quad tree's one traversal) against the two searches
+/// it replaces (`nearest_then_around`).
+fn nearest_and_around(c: &mut Criterion) {
+    let mut g = c.benchmark_group("nearest_and_around");
+    for n in [10_000, 100_000] {
+        let (data, queries) = workload(n);
+        tune(&mut g, 0);
+        g.throughput(Throughput::Elements(QUERIES as u64));
+        let quad: QuadTree = build(&data);
+        let mut out = Vec::new();
+        g.bench_with_input(BenchmarkId::new("one-pass", n), &queries, |b, qs| {
+            b.iter(|| {
+                let mut found = 0;
+                for q in qs {
+                    let _ = quad.nearest_and_around(black_box(q), 1.0, 0.02, 0.3, &mut out);
+                    found += out.len();
+                }
+                found
+            });
+        });
+        g.bench_with_input(BenchmarkId::new("two-searches", n), &queries, |b, qs| {
+            b.iter(|| {
+                let mut found = 0;
+                for q in qs {
+                    let _ = nearest_then_around(&quad, black_box(q), 1.0, 0.02, 0.3, &mut out);
+                    found += out.len();
+                }
+                found
+            });
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, insertion, nearest, nearest_and_around);
 criterion_main!(benches);

@@ -77,6 +77,22 @@ pub fn check_against_oracle<I: SpatialIndex + Default>(points: &[Point2<f64>], s
                 "within {radius} of {q}"
             );
         }
+        for (limit, slack, max_reach) in [(0.25, 0.05, 0.3), (4.0, 0.0, 1.0), (0.01, 0.5, 0.05)] {
+            let a = index.nearest_and_around(&q, limit, slack, max_reach, &mut got);
+            let b =
+                crate::index::nearest_then_around(&oracle, &q, limit, slack, max_reach, &mut want);
+            assert_eq!(
+                (a.0.map(|n| n.dist_sq), a.1),
+                (b.0.map(|n| n.dist_sq), b.1),
+                "nearest_and_around {limit} {slack} {max_reach} of {q}"
+            );
+            assert_eq!(sorted_ids(&got), sorted_ids(&want), "around {q}");
+            // The same points in the same order as the index's own two searches.
+            let c =
+                crate::index::nearest_then_around(&index, &q, limit, slack, max_reach, &mut want);
+            assert_eq!((a.0.map(|n| n.id), a.1), (c.0.map(|n| n.id), c.1));
+            assert_eq!(got, want, "in within_radius's order, around {q}");
+        }
         for k in [1, 3, 10] {
             index.k_nearest(&q, k, &mut got);
             oracle.k_nearest(&q, k, &mut want);

@@ -77,6 +77,29 @@ pub fn check_point(p: &Point2<f64>, len: usize) -> Result<(), IndexError> {
     Ok(())
 }
 
+/// [`SpatialIndex::nearest_and_around`] as two searches: the nearest point within the limit,
+/// then, when it lies within `max_reach`, every point within its distance plus `slack`. The
+/// reference every one-pass answer must equal.
+pub fn nearest_then_around<I: SpatialIndex + ?Sized>(
+    index: &I,
+    q: &Point2<f64>,
+    max_dist_sq: f64,
+    slack: f64,
+    max_reach: f64,
+    out: &mut Vec<Neighbour>,
+) -> (Option<Neighbour>, Option<f64>) {
+    let nearest = index.nearest_within(q, max_dist_sq);
+    let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
+    if reach <= max_reach {
+        let radius = reach + slack;
+        index.within_radius(q, radius, out);
+        (nearest, Some(radius))
+    } else {
+        out.clear();
+        (nearest, None)
+    }
+}
+
 /// A set of 2D points that grows by insertion and answers proximity queries.
 ///
 /// Queries with a non-finite query point return nothing. Matchers are generic over this trait,
@@ -99,6 +122,24 @@ pub trait SpatialIndex {
 
     /// The `k` nearest points (fewer if the index is smaller), sorted by distance.
     fn k_nearest(&self, q: &Point2<f64>, k: usize, out: &mut Vec<Neighbour>);
+
+    /// [`nearest_within`](Self::nearest_within) and, in the same call, the neighbourhood a
+    /// cache of nearest-neighbour answers keeps: when the nearest point (or, with none, the
+    /// limit) lies within `max_reach` of `q`, `out` receives exactly what
+    /// [`within_radius`](Self::within_radius) gives for the radius `reach + slack` (the same
+    /// points in the same order) and that radius is returned; otherwise `out` is left empty
+    /// and the radius is `None`. The default runs the two searches ([`nearest_then_around`]);
+    /// an index may answer both in one pass, as the quad tree does.
+    fn nearest_and_around(
+        &self,
+        q: &Point2<f64>,
+        max_dist_sq: f64,
+        slack: f64,
+        max_reach: f64,
+        out: &mut Vec<Neighbour>,
+    ) -> (Option<Neighbour>, Option<f64>) {
+        nearest_then_around(self, q, max_dist_sq, slack, max_reach, out)
+    }
 
     /// The nearest point, if the index is not empty.
     fn nearest(&self, q: &Point2<f64>) -> Option<Neighbour> {

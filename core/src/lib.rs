@@ -28,7 +28,9 @@ pub mod scan;
 pub mod testdata;
 
 pub use config_error::ConfigError;
-pub use index::{BruteForce, IndexError, Neighbour, PointId, SpatialIndex, dist_sq};
+pub use index::{
+    BruteForce, IndexError, Neighbour, PointId, SpatialIndex, dist_sq, nearest_then_around,
+};
 pub use kdtree::KdTree;
 pub use matcher::ScanMatcher;
 pub use metric::{ClosestPoint, CorrespondenceMetric, MatchingRange, MutualNearest, Pair, Query};

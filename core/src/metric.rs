@@ -178,12 +178,18 @@ impl NearestCache {
                 }
             }
         }
-        let nearest = reference.nearest_within(p, max_dist_sq);
-        let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
-        if reach <= Self::MAX_RADIUS {
+        // The nearest point, and every point within its distance plus the slack, in one
+        // search where the index can (the quad tree can).
+        let (nearest, radius) = reference.nearest_and_around(
+            p,
+            max_dist_sq,
+            entry.slack,
+            Self::MAX_RADIUS,
+            &mut entry.found,
+        );
+        if let Some(radius) = radius {
             entry.center = *p;
-            entry.radius = reach + entry.slack;
-            reference.within_radius(p, entry.radius, &mut entry.found);
+            entry.radius = radius;
             // Dense maps fill a wide disc with hundreds of points, sparse ones leave a narrow
             // one empty: each entry (the same beam scan after scan) finds its own width.
             if entry.found.len() > Self::MANY {

@@ -491,6 +491,77 @@ impl<const B: usize> SpatialIndex for QuadTreeN<B> {
         );
     }
 
+    /// One traversal for both answers. Its bound is the larger of the nearest search's
+    /// (the best distance so far) and the neighbourhood's (that distance, capped at
+    /// `max_reach`, plus `slack`, squared); both only shrink, so every leaf the two searches
+    /// would visit is visited, in the same order, and every point that ends within the
+    /// final radius was collected when its leaf was seen. The points collected beyond it are
+    /// dropped at the end, which leaves `within_radius`'s answer, order included.
+    fn nearest_and_around(
+        &self,
+        q: &Point2<f64>,
+        max_dist_sq: f64,
+        slack: f64,
+        max_reach: f64,
+        out: &mut Vec<Neighbour>,
+    ) -> (Option<Neighbour>, Option<f64>) {
+        if !(q.x.is_finite() && q.y.is_finite())
+            || max_dist_sq.is_nan()
+            || !(slack >= 0.0 && slack.is_finite())
+            || max_reach.is_nan()
+        {
+            return crate::index::nearest_then_around(self, q, max_dist_sq, slack, max_reach, out);
+        }
+        out.clear();
+        let around = |reach_sq: f64| {
+            let r = reach_sq.sqrt().min(max_reach).max(0.0) + slack;
+            r * r
+        };
+        let best_d = std::cell::Cell::new(max_dist_sq.next_up());
+        let collect = std::cell::Cell::new(around(max_dist_sq));
+        let bound = std::cell::Cell::new(best_d.get().max(collect.get()));
+        let mut best_slot = usize::MAX;
+        self.traverse(
+            q.x,
+            q.y,
+            || bound.get(),
+            |leaf| {
+                let base = leaf as usize * B;
+                for s in base..base + self.leaf_len[leaf as usize] as usize {
+                    let dx = self.slot_x[s] - q.x;
+                    let dy = self.slot_y[s] - q.y;
+                    let d = dx * dx + dy * dy;
+                    if d < best_d.get() {
+                        best_d.set(d);
+                        best_slot = s;
+                        collect.set(around(d));
+                        bound.set(d.max(collect.get()));
+                    }
+                    if d <= collect.get() {
+                        self.for_each_duplicate(self.slot_id[s], |id| {
+                            out.push(Neighbour {
+                                id,
+                                point: self.points[id as usize],
+                                dist_sq: d,
+                            });
+                        });
+                    }
+                }
+            },
+        );
+        let nearest = (best_slot != usize::MAX).then(|| self.neighbour(self.slot_id[best_slot], q));
+        let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
+        if reach <= max_reach {
+            let radius = reach + slack;
+            let r2 = radius * radius;
+            out.retain(|n| n.dist_sq <= r2);
+            (nearest, Some(radius))
+        } else {
+            out.clear();
+            (nearest, None)
+        }
+    }
+
     fn k_nearest(&self, q: &Point2<f64>, k: usize, out: &mut Vec<Neighbour>) {
         out.clear();
         if k == 0 || !(q.x.is_finite() && q.y.is_finite()) {
