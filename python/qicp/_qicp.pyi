@@ -183,7 +183,9 @@ def read_tum(path: _StrPath) -> npt.NDArray[np.float64]:
     """A TUM trajectory as an N×4 array."""
 
 def write_tum(path: _StrPath, trajectory: _Trajectory) -> None:
-    """Writes a trajectory as TUM, as ``qicp match`` writes ``trajectory.tum``."""
+    """Writes a trajectory as TUM, as ``qicp match`` writes ``trajectory.tum``: to a temporary
+    file beside ``path``, renamed into place when complete (a failed write leaves no partial
+    file, and a link at ``path`` is replaced, not followed)."""
 
 def matcher_names() -> list[str]:
     """The matcher names the registry resolves."""

@@ -120,15 +120,19 @@ pub(crate) fn read_tum<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'p
 }
 
 /// Writes a trajectory (N×4: t, x, y, θ) as TUM, number for number as `qicp match` writes
-/// its `trajectory.tum`.
+/// its `trajectory.tum`, and like it to a temporary file renamed into place when complete.
 #[pyfunction]
 pub(crate) fn write_tum(
     path: PathBuf,
     trajectory: PyArrayLike2<'_, f64, AllowTypeChange>,
 ) -> PyResult<()> {
     let traj = stamped("trajectory", trajectory)?;
-    let file = std::fs::File::create(&path)
-        .map_err(|e| refusal_in(format!("creating {}", path.display()), e))?;
-    qicp_io::tum::write_tum(file, &traj)
-        .map_err(|e| refusal_in(format!("writing {}", path.display()), e))
+    // A temporary file beside `path`, renamed when complete: a failed write leaves no partial
+    // trajectory, and an existing file is replaced whole or not at all.
+    let mut file = qicp_runner::output::OutputFile::create(&path)
+        .map_err(|e| QicpError::new_err(format!("{e:#}")))?;
+    qicp_io::tum::write_tum(&mut file, &traj)
+        .map_err(|e| refusal_in(format!("writing {}", path.display()), e))?;
+    file.commit()
+        .map_err(|e| QicpError::new_err(format!("{e:#}")))
 }

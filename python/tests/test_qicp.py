@@ -156,6 +156,28 @@ def test_bad_input_raises_instead_of_crashing(tmp_path):
         qicp.ate([(0.0, 1.0, 2.0)], [(0.0, 1.0, 2.0)])
 
 
+def test_write_tum_replaces_a_file_whole_or_not_at_all(tmp_path):
+    out = tmp_path / "est.tum"
+    out.write_text("old contents\n")
+    with pytest.raises(qicp.QicpError, match="4 columns"):
+        qicp.write_tum(out, [(0.0, 1.0, 2.0)])
+    assert out.read_text() == "old contents\n", "a refused trajectory leaves the old file"
+    with pytest.raises(qicp.QicpError, match="missing"):
+        qicp.write_tum(tmp_path / "missing" / "est.tum", [(0.0, 1.0, 2.0, 0.0)])
+    qicp.write_tum(out, [(0.0, 1.0, 2.0, 0.0), (1.0, 2.0, 2.0, 0.0)])
+    assert len(out.read_text().splitlines()) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["est.tum"], "no temporary file is left"
+    # The file is renamed into place, not written through whatever lies at the path: a link
+    # planted there is replaced, and the file it points to is left alone.
+    other = tmp_path / "other.txt"
+    other.write_text("someone else's\n")
+    out.unlink()
+    out.symlink_to(other)
+    qicp.write_tum(out, [(0.0, 1.0, 2.0, 0.0)])
+    assert other.read_text() == "someone else's\n"
+    assert not out.is_symlink() and len(out.read_text().splitlines()) == 1
+
+
 def test_ate_is_the_command_lines(intel, qicp_bin, tmp_path):
     truth = [(float(t), math.cos(t / 10) * t, math.sin(t / 10) * t, t / 10) for t in range(200)]
     est = [(t, x + 0.01 * math.sin(t), y, th + 0.001 * t) for t, x, y, th in truth]
