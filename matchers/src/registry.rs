@@ -151,6 +151,16 @@ impl SpatialIndex for Box<dyn AnyIndex> {
     fn k_nearest(&self, q: &qicp_core::Point2<f64>, k: usize, out: &mut Vec<qicp_core::Neighbour>) {
         (**self).k_nearest(q, k, out);
     }
+    fn nearest_and_around(
+        &self,
+        q: &qicp_core::Point2<f64>,
+        max_dist_sq: f64,
+        slack: f64,
+        max_reach: f64,
+        out: &mut Vec<qicp_core::Neighbour>,
+    ) -> (Option<qicp_core::Neighbour>, Option<f64>) {
+        (**self).nearest_and_around(q, max_dist_sq, slack, max_reach, out)
+    }
 }
 
 type IndexFactory = Arc<dyn Fn() -> Box<dyn AnyIndex> + Send + Sync>;
