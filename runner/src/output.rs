@@ -9,6 +9,9 @@
 //! [`remove_on_signal`] starts a thread that, on SIGINT, SIGTERM or SIGHUP, removes the listed
 //! files and then lets the signal end the process as it would have (exit status 128 + signal
 //! in a shell). Nothing is ever written under the final names but by the rename.
+//!
+//! A path that names a device, a pipe or a socket (`/dev/null`, `/dev/stdout`, a FIFO) is
+//! written to directly: a rename would replace it with a regular file.
 
 use anyhow::{Context, Result};
 use std::collections::BTreeMap;
@@ -47,9 +50,48 @@ impl Drop for Listed {
 #[derive(Debug)]
 pub struct OutputFile {
     path: PathBuf,
-    file: BufWriter<NamedTempFile>,
+    file: BufWriter<Target>,
     // Declared after `file`, so it is unlisted only once the file is removed or renamed.
-    _listed: Listed,
+    _listed: Option<Listed>,
+}
+
+/// Where an [`OutputFile`]'s bytes go.
+#[derive(Debug)]
+enum Target {
+    /// The temporary file renamed into place.
+    Temporary(NamedTempFile),
+    /// A device, pipe or socket at the path, written to directly.
+    Special(std::fs::File),
+}
+
+impl Write for Target {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self {
+            Target::Temporary(f) => f.write(buf),
+            Target::Special(f) => f.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            Target::Temporary(f) => f.flush(),
+            Target::Special(f) => f.flush(),
+        }
+    }
+}
+
+impl Seek for Target {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        match self {
+            Target::Temporary(f) => f.seek(pos),
+            Target::Special(f) => f.seek(pos),
+        }
+    }
+}
+
+/// True when `path` (its link followed) is a device, a pipe or a socket.
+fn is_special(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
 impl OutputFile {
@@ -57,6 +99,17 @@ impl OutputFile {
     /// before any work), with the permissions an ordinary new file gets (0644 less the umask),
     /// not tempfile's private 0600, since it becomes the output.
     pub fn create(path: &Path) -> Result<Self> {
+        if is_special(path) {
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            return Ok(Self {
+                path: path.to_path_buf(),
+                file: BufWriter::new(Target::Special(file)),
+                _listed: None,
+            });
+        }
         let dir = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
             _ => Path::new("."),
@@ -86,8 +139,8 @@ impl OutputFile {
         drop(registry);
         Ok(Self {
             path: path.to_path_buf(),
-            file: BufWriter::new(file),
-            _listed: Listed(number),
+            file: BufWriter::new(Target::Temporary(file)),
+            _listed: Some(Listed(number)),
         })
     }
 
@@ -99,13 +152,17 @@ impl OutputFile {
 
     /// The temporary file's path, for a writer that takes a path rather than a `Write` (a
     /// plotting backend): what it writes there is what [`commit`](Self::commit) renames into
-    /// place. It ends in the final path's extension.
+    /// place. It ends in the final path's extension. For a device, pipe or socket, its path.
     #[must_use]
     pub fn temp_path(&self) -> &Path {
-        self.file.get_ref().path()
+        match self.file.get_ref() {
+            Target::Temporary(f) => f.path(),
+            Target::Special(_) => &self.path,
+        }
     }
 
-    /// Flushes the file, syncs its data to disk and renames it to its path.
+    /// Flushes the file, syncs its data to disk and renames it to its path (a device, pipe or
+    /// socket is only flushed).
     pub fn commit(self) -> Result<()> {
         let Self {
             path,
@@ -116,6 +173,10 @@ impl OutputFile {
             .into_inner()
             .map_err(|e| e.into_error())
             .with_context(|| format!("writing {}", path.display()))?;
+        let file = match file {
+            Target::Temporary(file) => file,
+            Target::Special(_) => return Ok(()),
+        };
         file.as_file()
             .sync_data()
             .with_context(|| format!("writing {}", path.display()))?;
@@ -256,7 +317,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("dir");
         let path = dir.path().join("trajectory.tum");
         let mut out = OutputFile::create(&path).expect("created");
-        let temp = out.file.get_ref().path().to_path_buf();
+        let temp = out.temp_path().to_path_buf();
         assert!(live().paths.values().any(|p| *p == temp));
         out.write_all(b"0 0 0 0 0 0 0 1\n").expect("written");
         assert!(!path.exists());
@@ -295,7 +356,7 @@ mod tests {
         // holds the files of tests running beside this one).
         let registry = Registry {
             next: 2,
-            paths: [kept.file.get_ref().path(), committed.file.get_ref().path()]
+            paths: [kept.temp_path(), committed.temp_path()]
                 .into_iter()
                 .enumerate()
                 .map(|(i, p)| (i as u64, p.to_path_buf()))
@@ -306,6 +367,53 @@ mod tests {
         assert!(hidden_files(dir.path()).is_empty());
         assert!(dir.path().join("b.tum").exists());
         drop(kept);
+    }
+
+    #[test]
+    fn a_pipe_at_the_path_is_written_to_not_replaced() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().expect("dir");
+        let fifo = dir.path().join("poses.tum");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("mkfifo runs");
+        assert!(made.success());
+        // And through a link to it, as /dev/stdout links to the process's output.
+        let link = dir.path().join("link.tum");
+        std::os::unix::fs::symlink(&fifo, &link).expect("link");
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read_to_string(fifo).expect("read"))
+        };
+        let mut out = OutputFile::create(&link).expect("opened");
+        out.write_all(b"0 1 2 0 0 0 0 1\n").expect("written");
+        out.commit().expect("committed");
+        // Checked before waiting for the reader, which a rename would leave waiting.
+        assert!(std::fs::symlink_metadata(&link).expect("link").is_symlink());
+        assert!(
+            std::fs::metadata(&fifo)
+                .expect("still there")
+                .file_type()
+                .is_fifo()
+        );
+        assert_eq!(reader.join().expect("reader"), "0 1 2 0 0 0 0 1\n");
+    }
+
+    #[test]
+    fn a_link_to_a_regular_file_is_replaced_not_written_through() {
+        let dir = tempfile::tempdir().expect("dir");
+        let other = dir.path().join("other.txt");
+        std::fs::write(&other, "someone else's").expect("written");
+        let link = dir.path().join("trajectory.tum");
+        std::os::unix::fs::symlink(&other, &link).expect("link");
+        write_atomic(&link, b"ours").expect("written");
+        assert_eq!(
+            std::fs::read_to_string(&other).expect("read"),
+            "someone else's"
+        );
+        assert!(!std::fs::symlink_metadata(&link).expect("file").is_symlink());
+        assert_eq!(std::fs::read_to_string(&link).expect("read"), "ours");
     }
 
     #[test]
