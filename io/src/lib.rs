@@ -45,7 +45,7 @@ where
 }
 
 use std::fs::File;
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 use thiserror::Error;
 
@@ -133,9 +133,96 @@ pub fn open_text(path: &Path) -> Result<Box<dyn BufRead + Send>, LogError> {
     let head = reader.fill_buf().map_err(|e| LogError::io(path, e))?;
     if head.starts_with(BZIP2_MAGIC) {
         let decoder = bzip2::read::MultiBzDecoder::new(reader);
-        Ok(Box::new(BufReader::with_capacity(1 << 16, decoder)))
+        let ahead = ReadAhead::spawn(decoder).map_err(|e| LogError::io(path, e))?;
+        Ok(Box::new(BufReader::with_capacity(1 << 16, ahead)))
     } else {
         Ok(Box::new(reader))
+    }
+}
+
+/// Size of the chunks a [`ReadAhead`] thread reads (bytes).
+const AHEAD_CHUNK: usize = 1 << 16;
+/// Chunks a [`ReadAhead`] thread may read before they are taken: the bound on its memory
+/// (256 KiB with [`AHEAD_CHUNK`]).
+const AHEAD_CHUNKS: usize = 4;
+
+/// A reader whose source is read on its own thread, a few chunks ahead: decompressing a bz2
+/// log (5-7 % of a boosted match on Intel, a fifth of a scan-to-scan one) runs beside the
+/// matching on a second core instead of before it. Bytes and errors arrive in the source's
+/// order; the thread ends at the source's end or error, or when the reader is dropped.
+#[derive(Debug)]
+pub struct ReadAhead {
+    chunks: std::sync::mpsc::Receiver<std::io::Result<Vec<u8>>>,
+    chunk: Vec<u8>,
+    at: usize,
+    done: bool,
+}
+
+impl ReadAhead {
+    /// Starts the thread reading `source`.
+    ///
+    /// # Errors
+    /// When the thread cannot be started.
+    pub fn spawn<R: Read + Send + 'static>(mut source: R) -> std::io::Result<Self> {
+        let (send, chunks) = std::sync::mpsc::sync_channel(AHEAD_CHUNKS);
+        std::thread::Builder::new()
+            .name("qicp-read-ahead".into())
+            .spawn(move || {
+                loop {
+                    let mut chunk = vec![0; AHEAD_CHUNK];
+                    let got = loop {
+                        match source.read(&mut chunk) {
+                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                            other => break other,
+                        }
+                    };
+                    let last = !matches!(got, Ok(n) if n > 0);
+                    let item = got.map(|n| {
+                        chunk.truncate(n);
+                        chunk
+                    });
+                    // A dropped reader wants no more.
+                    if send.send(item).is_err() || last {
+                        return;
+                    }
+                }
+            })?;
+        Ok(Self {
+            chunks,
+            chunk: Vec::new(),
+            at: 0,
+            done: false,
+        })
+    }
+}
+
+impl Read for ReadAhead {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        while self.at == self.chunk.len() {
+            if self.done {
+                return Ok(0);
+            }
+            match self.chunks.recv() {
+                Ok(Ok(chunk)) => {
+                    self.done = chunk.is_empty();
+                    self.chunk = chunk;
+                    self.at = 0;
+                }
+                Ok(Err(e)) => {
+                    self.done = true;
+                    return Err(e);
+                }
+                // The thread panicked (a source that panics): say so, do not end quietly.
+                Err(_) => {
+                    self.done = true;
+                    return Err(std::io::Error::other("the read-ahead thread stopped"));
+                }
+            }
+        }
+        let n = buf.len().min(self.chunk.len() - self.at);
+        buf[..n].copy_from_slice(&self.chunk[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
     }
 }
 
@@ -208,4 +295,103 @@ pub(crate) fn read_rows8<R: BufRead + ?Sized>(
 /// A decimal number as the logs write it; `None` if the token is not one.
 pub fn parse_f64(token: &str) -> Option<f64> {
     token.parse::<f64>().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    /// Hands out its bytes a few at a time (as a decoder does), then, if told, an error.
+    struct Trickle {
+        bytes: Vec<u8>,
+        at: usize,
+        step: usize,
+        fail_at_end: bool,
+        dropped: Arc<AtomicBool>,
+    }
+
+    impl Read for Trickle {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            if self.at == self.bytes.len() && self.fail_at_end {
+                return Err(std::io::Error::other("corrupt stream"));
+            }
+            let n = buf.len().min(self.step).min(self.bytes.len() - self.at);
+            buf[..n].copy_from_slice(&self.bytes[self.at..self.at + n]);
+            self.at += n;
+            Ok(n)
+        }
+    }
+
+    impl Drop for Trickle {
+        fn drop(&mut self) {
+            self.dropped.store(true, Ordering::SeqCst);
+        }
+    }
+
+    fn trickle(len: usize, step: usize, fail_at_end: bool) -> (Trickle, Arc<AtomicBool>) {
+        let dropped = Arc::new(AtomicBool::new(false));
+        let bytes = (0..len).map(|k| (k * 7 + k / 251) as u8).collect();
+        let source = Trickle {
+            bytes,
+            at: 0,
+            step,
+            fail_at_end,
+            dropped: Arc::clone(&dropped),
+        };
+        (source, dropped)
+    }
+
+    #[test]
+    fn read_ahead_gives_the_sources_bytes_in_order() {
+        for len in [
+            0,
+            1,
+            1000,
+            AHEAD_CHUNK - 1,
+            AHEAD_CHUNK,
+            AHEAD_CHUNK + 1,
+            700_001,
+        ] {
+            for step in [1 << 20, 4093] {
+                let (source, _) = trickle(len, step, false);
+                let want = source.bytes.clone();
+                let mut got = Vec::new();
+                ReadAhead::spawn(source)
+                    .unwrap()
+                    .read_to_end(&mut got)
+                    .unwrap();
+                assert!(got == want, "{len} bytes read {step} at a time");
+            }
+        }
+    }
+
+    #[test]
+    fn read_ahead_passes_on_the_sources_error_after_its_bytes() {
+        let (source, _) = trickle(200_000, 5000, true);
+        let want = source.bytes.clone();
+        let mut reader = ReadAhead::spawn(source).unwrap();
+        let mut got = vec![0; want.len()];
+        reader.read_exact(&mut got).unwrap();
+        assert!(got == want);
+        let err = reader.read(&mut [0; 16]).unwrap_err();
+        assert_eq!(err.to_string(), "corrupt stream");
+    }
+
+    #[test]
+    fn a_dropped_read_ahead_stops_its_thread() {
+        let (source, dropped) = trickle(10 << 20, 1 << 16, false);
+        let mut reader = ReadAhead::spawn(source).unwrap();
+        reader.read_exact(&mut [0; 100]).unwrap();
+        drop(reader);
+        // The thread sees the closed channel at its next chunk and drops the source.
+        for _ in 0..500 {
+            if dropped.load(Ordering::SeqCst) {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        panic!("the source of a dropped reader is still held after 5 s");
+    }
 }
