@@ -77,7 +77,15 @@ pub fn check_against_oracle<I: SpatialIndex + Default>(points: &[Point2<f64>], s
                 "within {radius} of {q}"
             );
         }
-        for (limit, slack, max_reach) in [(0.25, 0.05, 0.3), (4.0, 0.0, 1.0), (0.01, 0.5, 0.05)] {
+        for (limit, slack, max_reach) in [
+            (0.25, 0.05, 0.3),
+            (4.0, 0.0, 1.0),
+            (0.01, 0.5, 0.05),
+            // No point within the limit, whose disc is still searched.
+            (0.01, 0.02, 0.3),
+            (0.0, 0.0, 0.0),
+            (f64::INFINITY, 0.01, f64::INFINITY),
+        ] {
             let a = index.nearest_and_around(&q, limit, slack, max_reach, &mut got);
             let b =
                 crate::index::nearest_then_around(&oracle, &q, limit, slack, max_reach, &mut want);

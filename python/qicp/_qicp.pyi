@@ -185,7 +185,8 @@ def read_tum(path: _StrPath) -> npt.NDArray[np.float64]:
 def write_tum(path: _StrPath, trajectory: _Trajectory) -> None:
     """Writes a trajectory as TUM, as ``qicp match`` writes ``trajectory.tum``: to a temporary
     file beside ``path``, renamed into place when complete (a failed write leaves no partial
-    file, and a link at ``path`` is replaced, not followed)."""
+    file, and a link at ``path`` to a regular file is replaced, not followed; a device or a pipe
+    there is written to)."""
 
 def matcher_names() -> list[str]:
     """The matcher names the registry resolves."""
