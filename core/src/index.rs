@@ -89,15 +89,27 @@ pub fn nearest_then_around<I: SpatialIndex + ?Sized>(
     out: &mut Vec<Neighbour>,
 ) -> (Option<Neighbour>, Option<f64>) {
     let nearest = index.nearest_within(q, max_dist_sq);
-    let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
-    if reach <= max_reach {
-        let radius = reach + slack;
-        index.within_radius(q, radius, out);
-        (nearest, Some(radius))
-    } else {
-        out.clear();
-        (nearest, None)
+    let radius = around_radius(nearest.as_ref(), max_dist_sq, slack, max_reach);
+    match radius {
+        Some(r) => index.within_radius(q, r, out),
+        None => out.clear(),
     }
+    (nearest, radius)
+}
+
+/// The radius of [`SpatialIndex::nearest_and_around`]'s neighbourhood: the nearest point's
+/// distance (or, with none, the limit's) plus `slack`, when that distance is within
+/// `max_reach`. Every implementation computes it here, so that equal answers are
+/// bit-identical.
+#[must_use]
+pub fn around_radius(
+    nearest: Option<&Neighbour>,
+    max_dist_sq: f64,
+    slack: f64,
+    max_reach: f64,
+) -> Option<f64> {
+    let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
+    (reach <= max_reach).then_some(reach + slack)
 }
 
 /// A set of 2D points that grows by insertion and answers proximity queries.

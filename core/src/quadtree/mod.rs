@@ -435,16 +435,15 @@ impl<const B: usize> SpatialIndex for QuadTreeN<B> {
             },
         );
         let nearest = (best_slot != usize::MAX).then(|| self.neighbour(self.slot_id[best_slot], q));
-        let reach = nearest.map_or(max_dist_sq, |n| n.dist_sq).sqrt();
-        if reach <= max_reach {
-            let radius = reach + slack;
-            let r2 = radius * radius;
-            out.retain(|n| n.dist_sq <= r2);
-            (nearest, Some(radius))
-        } else {
-            out.clear();
-            (nearest, None)
+        let radius = crate::index::around_radius(nearest.as_ref(), max_dist_sq, slack, max_reach);
+        match radius {
+            Some(r) => {
+                let r2 = r * r;
+                out.retain(|n| n.dist_sq <= r2);
+            }
+            None => out.clear(),
         }
+        (nearest, radius)
     }
 
     fn k_nearest(&self, q: &Point2<f64>, k: usize, out: &mut Vec<Neighbour>) {
