@@ -89,6 +89,28 @@ impl Seek for Target {
     }
 }
 
+/// Gives `file`, which is to replace `path`, the permission bits of the regular file at `path`
+/// (setuid, setgid and sticky bits dropped) and, where the process may, its owner and group:
+/// replacing an output keeps who may read it. A link at `path` is replaced by a new file
+/// (never written through), which gets the permissions of a new file.
+fn keep_owner_and_mode(path: &Path, file: &std::fs::File) -> std::io::Result<()> {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let Ok(old) = std::fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    if !old.is_file() {
+        return Ok(());
+    }
+    // Owner first: changing it may clear permission bits, which are then set.
+    match std::os::unix::fs::fchown(file, Some(old.uid()), Some(old.gid())) {
+        // Only a privileged process may give a file away; the new file is then the writer's,
+        // as an output written in place by another user would be.
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {}
+        other => other?,
+    }
+    file.set_permissions(std::fs::Permissions::from_mode(old.mode() & 0o777))
+}
+
 /// True when `path` (its link followed) is a device, a pipe or a socket.
 fn is_special(path: &Path) -> bool {
     std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
@@ -97,7 +119,8 @@ fn is_special(path: &Path) -> bool {
 impl OutputFile {
     /// Opens the temporary file in `path`'s directory (which must exist: a bad path fails here,
     /// before any work), with the permissions an ordinary new file gets (0644 less the umask),
-    /// not tempfile's private 0600, since it becomes the output.
+    /// not tempfile's private 0600, since it becomes the output; where it replaces a regular
+    /// file, with that file's permissions and, where the process may, its owner.
     pub fn create(path: &Path) -> Result<Self> {
         if is_special(path) {
             let file = std::fs::OpenOptions::new()
@@ -132,6 +155,8 @@ impl OutputFile {
         let mut registry = live();
         let file = builder
             .tempfile_in(dir)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        keep_owner_and_mode(path, file.as_file())
             .with_context(|| format!("cannot write {}", path.display()))?;
         let number = registry.next;
         registry.next += 1;
@@ -414,6 +439,40 @@ mod tests {
         );
         assert!(!std::fs::symlink_metadata(&link).expect("file").is_symlink());
         assert_eq!(std::fs::read_to_string(&link).expect("read"), "ours");
+    }
+
+    #[test]
+    fn a_replaced_output_keeps_its_permissions_and_owner() {
+        use std::os::unix::fs::{MetadataExt, PermissionsExt};
+        let dir = tempfile::tempdir().expect("dir");
+        for mode in [0o600, 0o640, 0o444, 0o755] {
+            let path = dir.path().join("trajectory.tum");
+            std::fs::write(&path, "old").expect("written");
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).expect("mode");
+            write_atomic(&path, b"new").expect("written");
+            let meta = std::fs::metadata(&path).expect("file");
+            assert_eq!(meta.mode() & 0o7777, mode, "{mode:o}");
+            assert_eq!(std::fs::read_to_string(&path).expect("read"), "new");
+            std::fs::remove_file(&path).expect("removed");
+        }
+        // A fresh output gets an ordinary new file's permissions, not tempfile's 0600.
+        let fresh = dir.path().join("fresh.tum");
+        write_atomic(&fresh, b"new").expect("written");
+        let mode = std::fs::metadata(&fresh).expect("file").mode() & 0o777;
+        assert_eq!(mode & 0o644, mode, "{mode:o}");
+        assert_ne!(
+            mode & 0o044,
+            0,
+            "{mode:o}: readable by others unless the umask says no"
+        );
+        // The owner is kept where the process may give files away (root).
+        let path = dir.path().join("summary.json");
+        std::fs::write(&path, "old").expect("written");
+        if std::os::unix::fs::chown(&path, Some(4321), Some(4321)).is_ok() {
+            write_atomic(&path, b"new").expect("written");
+            let meta = std::fs::metadata(&path).expect("file");
+            assert_eq!((meta.uid(), meta.gid()), (4321, 4321));
+        }
     }
 
     #[test]
