@@ -198,16 +198,25 @@ pub struct Merge {
     /// wall fills with the first passes' samples of it; later passes that land a little off
     /// the wall add nothing there, so the map grows with the area explored, not with time.
     pub max_cell_points: u32,
+    /// A new point within this distance (m) of the surface through its nearest map point, when
+    /// that point was held before the scan (the map's polyline through its samples,
+    /// [`Reference::surface_foot`]), is not inserted:
+    /// the map holds that surface already. A wall seen again stays one sample thick instead
+    /// of thickening, visit after visit, into a band as wide as the laser's noise; a point
+    /// off the surface (another wall, a corner, a gap wider than the samples' spacing) still
+    /// enters. 0 inserts such points.
+    pub surface_band: f64,
 }
 
 impl Merge {
-    /// Only the minimum spacing, no cell cap.
+    /// Only the minimum spacing: no cell cap, no surface band.
     #[must_use]
     pub fn spacing(resolution: f64) -> Self {
         Self {
             resolution,
             cell_size: 0.0,
             max_cell_points: 0,
+            surface_band: 0.0,
         }
     }
 
@@ -331,8 +340,8 @@ impl<I: SpatialIndex> Reference<I> {
     /// the scan is merged into a map: each new point's spacing is lowered to its distance from
     /// the nearest point already held (and that point's likewise), so a surface seen many times
     /// reports the finer sampling it now has; a new point closer than `merge.resolution` to one
-    /// held is not inserted (0 keeps every point), nor one whose cell is full
-    /// ([`Merge::max_cell_points`]). Returns the number of points inserted; on error nothing
+    /// held is not inserted (0 keeps every point), nor one on a surface the map holds
+    /// ([`Merge::surface_band`]), nor one whose cell is full ([`Merge::max_cell_points`]). Returns the number of points inserted; on error nothing
     /// is inserted.
     pub fn insert_scan(
         &mut self,
@@ -350,6 +359,7 @@ impl<I: SpatialIndex> Reference<I> {
         for (k, p) in global.iter().enumerate() {
             crate::index::check_point(p, self.index.len() + k)?;
         }
+        let held = self.index.len();
         let mut inserted = 0;
         for (p, seen) in global.iter().zip(local) {
             let normal: Vector2<f64> = rot * seen.normal;
@@ -369,6 +379,17 @@ impl<I: SpatialIndex> Reference<I> {
                     let other = &mut self.info[n.id as usize];
                     other.spacing = other.spacing.min(d.max(resolution));
                     if d < resolution {
+                        continue;
+                    }
+                }
+                if merge.surface_band > 0.0 {
+                    let reach = info.spacing.max(resolution) + merge.surface_band;
+                    // Against the surfaces held before this scan: its own samples are its
+                    // surface, not a second look at one.
+                    if let Some(n) = self.index.nearest_within(p, reach * reach)
+                        && (n.id as usize) < held
+                        && (self.surface_foot(n.id, p) - p).norm() <= merge.surface_band
+                    {
                         continue;
                     }
                 }

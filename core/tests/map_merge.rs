@@ -1,8 +1,10 @@
-//! Merging scans into a map: the minimum spacing and the cell cap bound its density,
-//! checked against brute-force counts on seeded scans.
+//! Merging scans into a map: the minimum spacing, the surface band and the cell cap bound its
+//! density, checked against brute-force counts and a brute-force index on seeded scans.
 
 use qicp_core::testdata::{SplitMix, SyntheticWorld};
-use qicp_core::{Merge, Point2, Pose2, QuadTree, Reference, SpatialIndex};
+use qicp_core::{
+    BeamGeometry, BruteForce, KdTree, Merge, Point2, Pose2, QuadTree, Reference, Scan, SpatialIndex,
+};
 use std::collections::HashMap;
 
 /// Points per cell of side `size`, counted one by one.
@@ -18,9 +20,14 @@ fn cell_counts(points: &[Point2<f64>], size: f64) -> HashMap<(i64, i64), u32> {
 /// Forty scans of a room from poses a few centimetres apart, as revisits that land a little
 /// off the map would give.
 fn revisits(merge: Merge) -> Reference<QuadTree> {
+    revisits_in(QuadTree::default(), merge)
+}
+
+/// [`revisits`] into the index `index`.
+fn revisits_in<I: SpatialIndex>(index: I, merge: Merge) -> Reference<I> {
     let world = SyntheticWorld::room();
     let mut rng = SplitMix::new(7);
-    let mut map = Reference::new(QuadTree::default());
+    let mut map = Reference::new(index);
     for k in 0..40 {
         let pose = Pose2::new(
             rng.range(-0.05, 0.05),
@@ -36,9 +43,9 @@ fn revisits(merge: Merge) -> Reference<QuadTree> {
 #[test]
 fn no_map_cell_holds_more_points_than_its_cap() {
     let capped = Merge {
-        resolution: 0.01,
-        cell_size: 0.1,
         max_cell_points: 3,
+        cell_size: 0.1,
+        ..Merge::spacing(0.01)
     };
     let map = revisits(capped);
     let counts = cell_counts(map.index().points(), capped.cell_size);
@@ -66,14 +73,125 @@ fn no_map_cell_holds_more_points_than_its_cap() {
 fn a_cap_of_zero_keeps_every_point_the_spacing_keeps() {
     let off = Merge {
         max_cell_points: 0,
-        ..Merge {
-            resolution: 0.01,
-            cell_size: 0.1,
-            max_cell_points: 1,
-        }
+        cell_size: 0.1,
+        ..Merge::spacing(0.01)
     };
     assert_eq!(
         revisits(off).index().points(),
         revisits(Merge::spacing(0.01)).index().points()
+    );
+}
+
+/// A band of the laser's noise (the scans' σ is 5 mm) around the surfaces held.
+fn banded() -> Merge {
+    Merge {
+        surface_band: 0.005,
+        ..Merge::spacing(0.01)
+    }
+}
+
+#[test]
+fn revisits_thicken_a_surface_the_map_holds_less() {
+    let banded_map = revisits(banded());
+    let spacing_only = revisits(Merge::spacing(0.01));
+    // Forty looks at one room from a few centimetres apart: the spacing alone keeps adding
+    // the points that land more than its 1 cm from every point held (1,705 here); a band of
+    // the scans' noise drops those within it of the surface held (1,512). Points farther off
+    // still enter, so the band slows the growth rather than stopping it.
+    assert!(
+        (banded_map.len() as f64) < 0.92 * spacing_only.len() as f64,
+        "{} points with the band, {} without",
+        banded_map.len(),
+        spacing_only.len()
+    );
+    // The walls are all there: every point the spacing kept lies near a point the band kept.
+    for p in spacing_only.index().points() {
+        let n = banded_map.index().nearest(p).expect("points");
+        assert!(
+            n.dist_sq.sqrt() < 0.05,
+            "{p} is {} m from the map",
+            n.dist_sq.sqrt()
+        );
+    }
+    // The band never lets two points closer than the spacing (brute force).
+    let points = banded_map.index().points();
+    for (i, p) in points.iter().enumerate() {
+        for q in &points[i + 1..] {
+            assert!((p - q).norm() >= 0.01, "{p} and {q}");
+        }
+    }
+}
+
+#[test]
+fn a_surface_band_keeps_the_same_points_in_every_index() {
+    let quad = revisits(banded());
+    assert_eq!(
+        revisits_in(BruteForce::default(), banded())
+            .index()
+            .points(),
+        quad.index().points()
+    );
+    assert_eq!(
+        revisits_in(KdTree::default(), banded()).index().points(),
+        quad.index().points()
+    );
+}
+
+#[test]
+fn a_band_of_zero_keeps_every_point_the_spacing_keeps() {
+    let off = Merge {
+        surface_band: 0.0,
+        ..banded()
+    };
+    assert_eq!(
+        revisits(off).index().points(),
+        revisits(Merge::spacing(0.01)).index().points()
+    );
+}
+
+/// A scan whose every beam hits the wall `y = 1` (x from −1 to 1), seen from `(x0, 0)`.
+fn wall_scan(x0: f64, offset: f64) -> (Scan, Pose2) {
+    let geometry = BeamGeometry::centered(41, 0.5, 30.0);
+    let ranges = (0..41)
+        .map(|i| (1.0 + offset) / geometry.angle(i).cos())
+        .collect();
+    let pose = Pose2::new(x0, 0.0, std::f64::consts::FRAC_PI_2);
+    (Scan::new(0.0, geometry, ranges).expect("finite"), pose)
+}
+
+#[test]
+fn a_point_off_the_surface_by_more_than_the_band_still_enters() {
+    let merge = Merge {
+        surface_band: 0.01,
+        ..Merge::spacing(0.0)
+    };
+    let insert = |map: &mut Reference<QuadTree>, x0: f64, offset: f64| {
+        let (scan, pose) = wall_scan(x0, offset);
+        map.insert_scan(&scan, &pose, Some(merge)).expect("finite")
+    };
+    let mut map = Reference::new(QuadTree::default());
+    assert_eq!(insert(&mut map, 0.0, 0.0), 41);
+    // The same wall seen again 5 mm off, from a little aside: nothing new.
+    assert_eq!(insert(&mut map, 0.01, 0.005), 0);
+    // A copy 3 cm off the wall (a wrong match, or a second surface) enters whole.
+    assert_eq!(insert(&mut map, 0.0, 0.03), 41);
+    // The wall seen farther along: what lies beyond its end (x ≈ 0.255) is new ground.
+    let mut fresh = Reference::new(QuadTree::default());
+    insert(&mut fresh, 0.0, 0.0);
+    let (scan, pose) = wall_scan(0.4, 0.0);
+    let past_the_end = scan
+        .points()
+        .iter()
+        .filter(|p| pose.transform_point(p).x > 0.3)
+        .count();
+    let new = insert(&mut fresh, 0.4, 0.0);
+    let added = &fresh.index().points()[41..];
+    assert!(
+        added.iter().all(|p| p.x > 0.255),
+        "a point on the held part entered: {added:?}"
+    );
+    assert!(
+        new >= past_the_end && past_the_end > 20,
+        "{new} new, {past_the_end} past the end"
     );
 }

@@ -33,6 +33,15 @@ pub struct Relevance {
     /// radius queries grow with the map's density (40 ms/scan on a corridor map without it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub map_resolution: Option<f64>,
+    /// A new point within this many laser range-noise σ (`matcher.laser.sigma_range`) of the
+    /// surface through its nearest map point is not inserted ([`Merge::surface_band`]): the
+    /// map holds that surface already, so a wall seen again stays one sample thick instead of
+    /// thickening into a band of the laser's noise on every visit, and the map grows with
+    /// the area explored. Unlike the cell cap it never stops a second copy of a wall that
+    /// lies off the first by more than the noise. 0 inserts such points, as Alg. 1 reads.
+    /// Default 1 (1 cm for the default laser): the Intel map holds 107,782 points instead of
+    /// 159,906 for q-wsm (see the README).
+    pub surface_band_sigmas: f64,
     /// A relevant scan enters a boosted map only when at least this share of its points lies
     /// farther than `novelty_distance` from every map point: a place the map already holds
     /// adds nothing on a revisit, so the map grows with the area explored, not with the
@@ -77,6 +86,7 @@ impl Default for Relevance {
             tau_max: 0.25,
             rho_max_deg: 5.0,
             map_resolution: None,
+            surface_band_sigmas: 1.0,
             min_novelty: 0.0,
             novelty_distance: 0.05,
             cell_size: 0.1,
@@ -94,6 +104,10 @@ impl Relevance {
         non_negative(
             "matcher.relevance.map_resolution",
             self.map_resolution.unwrap_or(0.0),
+        )?;
+        non_negative(
+            "matcher.relevance.surface_band_sigmas",
+            self.surface_band_sigmas,
         )?;
         if !(0.0..=1.0).contains(&self.min_novelty) {
             return Err(ConfigError::invalid(
@@ -123,13 +137,15 @@ impl Relevance {
     }
 
     /// How a relevant scan is merged into a map whose matcher's own density bound is
-    /// `matcher_resolution` (used when `map_resolution` is not set).
+    /// `matcher_resolution` (used when `map_resolution` is not set), for a laser whose range
+    /// noise is `range_sigma` (m).
     #[must_use]
-    pub fn merge(&self, matcher_resolution: f64) -> Merge {
+    pub fn merge(&self, matcher_resolution: f64, range_sigma: f64) -> Merge {
         Merge {
             resolution: self.map_resolution.unwrap_or(matcher_resolution),
             cell_size: self.cell_size,
             max_cell_points: self.max_cell_points,
+            surface_band: self.surface_band_sigmas * range_sigma,
         }
     }
 
@@ -441,6 +457,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             laser: *laser,
             result,
             map_resolution: self.matcher.map_resolution(self.reference.noise()),
+            range_sigma: self.reference.noise().sigma_range,
         };
         let mut store = Store {
             reference: &mut self.reference,

@@ -42,6 +42,9 @@ pub struct Matched<'a> {
     /// The matcher's own bound on a map's density (m): the default of
     /// [`Relevance::map_resolution`].
     pub map_resolution: f64,
+    /// The laser's range noise σ (m), held by the reference: the unit of
+    /// [`Relevance::surface_band_sigmas`].
+    pub range_sigma: f64,
 }
 
 /// The reference as a policy sees it: the points (in the reference frame) and the frame's pose
@@ -119,7 +122,7 @@ impl ReferencePolicy for MapPolicy {
             return false;
         }
         // paper Alg. 1: insert all scan points of s_global into Q_t
-        let merge = Some(relevance.merge(m.map_resolution));
+        let merge = Some(relevance.merge(m.map_resolution, m.range_sigma));
         let inserted = reference.insert_scan(m.scan, &m.laser, merge);
         if inserted && relevance.window_scans > 0 {
             self.window.push_back((m.scan.clone(), m.laser));

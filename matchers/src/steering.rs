@@ -13,6 +13,7 @@ const STEERING_COMMON: &[&str] = &[
     "relevance.tau_max",
     "relevance.rho_max_deg",
     "relevance.map_resolution",
+    "relevance.surface_band_sigmas",
     "relevance.max_cell_points",
     "relevance.window_scans",
     "relevance.min_novelty",
