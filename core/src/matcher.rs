@@ -32,6 +32,15 @@ pub trait ScanMatcher {
         0.02
     }
 
+    /// How many laser range-noise σ a new map point may lie from the surface through its
+    /// nearest held point and still add nothing this matcher can use: the default of
+    /// `matcher.relevance.surface_band_sigmas` ([`Merge::surface_band`](crate::Merge)). Default
+    /// 1: a matcher that measures against the map's surfaces loses nothing when a wall seen
+    /// again is not sampled again within its noise. 0 for a matcher that needs every sample.
+    fn surface_band_sigmas(&self) -> f64 {
+        1.0
+    }
+
     /// The pose of `scan` in the frame of `reference`, starting from `guess`, trusting the
     /// scan alone.
     fn match_scan<I: SpatialIndex>(

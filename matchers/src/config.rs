@@ -450,6 +450,13 @@ impl MatcherConfig {
                 .unwrap_or(0.02);
             self.relevance.map_resolution = Some(resolution);
         }
+        if self.relevance.surface_band_sigmas.is_none() {
+            let sigmas = self
+                .algorithm
+                .surface_band_sigmas(&self.section)
+                .unwrap_or(1.0);
+            self.relevance.surface_band_sigmas = Some(sigmas);
+        }
     }
 
     /// Checks every value.

@@ -176,6 +176,14 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         "idc"
     }
 
+    /// 0: the matching-range rule pairs by bearing, and needs the samples of every look at a
+    /// wall inside its narrow angular window. With the band on, q-idc's Intel score with
+    /// every second beam went from 0.027 to 0.088 m (0.025 to 0.146 m on the first 3,000
+    /// scans).
+    fn surface_band_sigmas(&self) -> f64 {
+        0.0
+    }
+
     /// The prior (odometry) is fused with each iteration's estimate through the information
     /// of the closest-point pairs, and sizes the range rule's first window.
     fn match_with_prior<I: SpatialIndex>(

@@ -39,9 +39,11 @@ pub struct Relevance {
     /// thickening into a band of the laser's noise on every visit, and the map grows with
     /// the area explored. Unlike the cell cap it never stops a second copy of a wall that
     /// lies off the first by more than the noise. 0 inserts such points, as Alg. 1 reads.
-    /// Default 1 (1 cm for the default laser): the Intel map holds 107,782 points instead of
-    /// 159,906 for q-wsm (see the README).
-    pub surface_band_sigmas: f64,
+    /// Default (`None`): the matcher's own [`ScanMatcher::surface_band_sigmas`], 1 (1 cm for
+    /// the default laser; the Intel map holds 109,785 points instead of 159,906 for q-wsm),
+    /// and 0 for IDC, whose matching-range rule needs every sample (see the README).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_band_sigmas: Option<f64>,
     /// A relevant scan enters a boosted map only when at least this share of its points lies
     /// farther than `novelty_distance` from every map point: a place the map already holds
     /// adds nothing on a revisit, so the map grows with the area explored, not with the
@@ -86,7 +88,7 @@ impl Default for Relevance {
             tau_max: 0.25,
             rho_max_deg: 5.0,
             map_resolution: None,
-            surface_band_sigmas: 1.0,
+            surface_band_sigmas: None,
             min_novelty: 0.0,
             novelty_distance: 0.05,
             cell_size: 0.1,
@@ -107,7 +109,7 @@ impl Relevance {
         )?;
         non_negative(
             "matcher.relevance.surface_band_sigmas",
-            self.surface_band_sigmas,
+            self.surface_band_sigmas.unwrap_or(0.0),
         )?;
         if !(0.0..=1.0).contains(&self.min_novelty) {
             return Err(ConfigError::invalid(
@@ -137,15 +139,21 @@ impl Relevance {
     }
 
     /// How a relevant scan is merged into a map whose matcher's own density bound is
-    /// `matcher_resolution` (used when `map_resolution` is not set), for a laser whose range
-    /// noise is `range_sigma` (m).
+    /// `matcher_resolution` and surface band `matcher_band_sigmas` (used where
+    /// `map_resolution` and `surface_band_sigmas` are not set), for a laser whose range noise
+    /// is `range_sigma` (m).
     #[must_use]
-    pub fn merge(&self, matcher_resolution: f64, range_sigma: f64) -> Merge {
+    pub fn merge(
+        &self,
+        matcher_resolution: f64,
+        matcher_band_sigmas: f64,
+        range_sigma: f64,
+    ) -> Merge {
         Merge {
             resolution: self.map_resolution.unwrap_or(matcher_resolution),
             cell_size: self.cell_size,
             max_cell_points: self.max_cell_points,
-            surface_band: self.surface_band_sigmas * range_sigma,
+            surface_band: self.surface_band_sigmas.unwrap_or(matcher_band_sigmas) * range_sigma,
         }
     }
 
@@ -457,6 +465,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             laser: *laser,
             result,
             map_resolution: self.matcher.map_resolution(self.reference.noise()),
+            surface_band_sigmas: self.matcher.surface_band_sigmas(),
             range_sigma: self.reference.noise().sigma_range,
         };
         let mut store = Store {

@@ -42,6 +42,11 @@ pub struct Matched<'a> {
     /// The matcher's own bound on a map's density (m): the default of
     /// [`Relevance::map_resolution`].
     pub map_resolution: f64,
+    /// The matcher's own surface band ([`ScanMatcher::surface_band_sigmas`]): the default of
+    /// [`Relevance::surface_band_sigmas`].
+    ///
+    /// [`ScanMatcher::surface_band_sigmas`]: qicp_core::ScanMatcher::surface_band_sigmas
+    pub surface_band_sigmas: f64,
     /// The laser's range noise σ (m), held by the reference: the unit of
     /// [`Relevance::surface_band_sigmas`].
     pub range_sigma: f64,
@@ -122,7 +127,7 @@ impl ReferencePolicy for MapPolicy {
             return false;
         }
         // paper Alg. 1: insert all scan points of s_global into Q_t
-        let merge = Some(relevance.merge(m.map_resolution, m.range_sigma));
+        let merge = Some(relevance.merge(m.map_resolution, m.surface_band_sigmas, m.range_sigma));
         let inserted = reference.insert_scan(m.scan, &m.laser, merge);
         if inserted && relevance.window_scans > 0 {
             self.window.push_back((m.scan.clone(), m.laser));

@@ -81,6 +81,12 @@ pub trait Algorithm: 'static {
     fn map_resolution(params: &Self::Params, noise: &LaserNoise) -> f64 {
         Self::matcher::<qicp_core::ClosestPoint>(IcpParams::default(), params).map_resolution(noise)
     }
+
+    /// The default of `matcher.relevance.surface_band_sigmas` for this algorithm: by default
+    /// its matcher's [`ScanMatcher::surface_band_sigmas`].
+    fn surface_band_sigmas(params: &Self::Params) -> f64 {
+        Self::matcher::<qicp_core::ClosestPoint>(IcpParams::default(), params).surface_band_sigmas()
+    }
 }
 
 /// An index a map can be held in, as the registry knows it.
@@ -197,6 +203,7 @@ pub(crate) trait ErasedAlgorithm: Send + Sync {
     fn effective(&self, section: &toml::Table) -> Result<toml::Table, ConfigError>;
     fn map_resolution(&self, section: &toml::Table, noise: &LaserNoise)
     -> Result<f64, ConfigError>;
+    fn surface_band_sigmas(&self, section: &toml::Table) -> Result<f64, ConfigError>;
     fn weighs_by_laser_noise(&self) -> bool;
     fn build(
         &self,
@@ -251,6 +258,9 @@ impl<A: Algorithm> ErasedAlgorithm for Registered<A> {
         noise: &LaserNoise,
     ) -> Result<f64, ConfigError> {
         Ok(A::map_resolution(&self.params(section)?, noise))
+    }
+    fn surface_band_sigmas(&self, section: &toml::Table) -> Result<f64, ConfigError> {
+        Ok(A::surface_band_sigmas(&self.params(section)?))
     }
     fn weighs_by_laser_noise(&self) -> bool {
         A::WEIGHS_BY_LASER_NOISE

@@ -361,7 +361,7 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     // Without the caps the map grows with every loop.
     let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
     config.relevance.map_resolution = Some(0.0);
-    config.relevance.surface_band_sigmas = 0.0;
+    config.relevance.surface_band_sigmas = Some(0.0);
     let mut pipeline = config.build().expect("builds");
     let mut sizes = Vec::new();
     for k in 0..120 {
@@ -391,21 +391,32 @@ fn loop_sizes(config: MatcherConfig, loops: usize) -> Vec<usize> {
 
 #[test]
 fn the_default_surface_band_slows_the_growth_of_a_map_driven_ten_times() {
+    // IDC's default has no band (its range rule needs every sample); it is checked on.
     for kind in [MatcherKind::QWsm, MatcherKind::QIdc] {
-        let banded = loop_sizes(MatcherConfig::defaults(kind), 10);
+        let mut banded = MatcherConfig::defaults(kind);
+        banded.relevance.surface_band_sigmas = Some(1.0);
+        let banded = loop_sizes(banded, 10);
         let mut plain = MatcherConfig::defaults(kind);
-        plain.relevance.surface_band_sigmas = 0.0;
+        plain.relevance.surface_band_sigmas = Some(0.0);
         let plain = loop_sizes(plain, 10);
         println!("{kind}: with the band {banded:?}, without {plain:?}");
         // The band keeps out what lands on the walls held (q-wsm: 2,924 points after ten
-        // loops against 4,263; q-idc, whose map is sparser by its 2 cm spacing: 1,398 against
-        // 1,522); what lands farther off still enters, so the map grows more slowly, it does
-        // not stop.
+        // loops against 4,263; q-idc with the band, whose map is sparser by its 2 cm
+        // spacing: 1,398 against 1,522); what lands farther off still enters, so the map
+        // grows more slowly, it does not stop.
         assert!(
             (banded[9] as f64) < 0.95 * plain[9] as f64,
             "{kind}: with the band {banded:?}, without {plain:?}"
         );
     }
+    // The defaults: on for WSM, off for IDC.
+    let effective = |kind| {
+        let mut c = MatcherConfig::defaults(kind);
+        c.fill_defaults();
+        c.relevance.surface_band_sigmas
+    };
+    assert_eq!(effective(MatcherKind::QWsm), Some(1.0));
+    assert_eq!(effective(MatcherKind::QIdc), Some(0.0));
 }
 
 #[test]
