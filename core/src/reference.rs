@@ -204,7 +204,7 @@ pub struct Merge {
     /// the map holds that surface already. A wall seen again stays one sample thick instead
     /// of thickening, visit after visit, into a band as wide as the laser's noise; a point
     /// off the surface (another wall, a corner, a gap wider than the samples' spacing) still
-    /// enters. 0 inserts such points.
+    /// enters. 0 (or a value that is not finite and positive) inserts such points.
     pub surface_band: f64,
 }
 
@@ -373,6 +373,8 @@ impl<I: SpatialIndex> Reference<I> {
             if let Some(merge) = merge {
                 let resolution = merge.resolution;
                 let reach = info.spacing.max(resolution);
+                // The nearest held point learns how finely its surface has been seen, whether
+                // or not this point is kept (the spacing's and the band's skips alike).
                 if let Some(n) = self.index.nearest_within(p, reach * reach) {
                     let d = n.dist_sq.sqrt().max(1e-4);
                     info.spacing = info.spacing.min(d);
@@ -382,13 +384,14 @@ impl<I: SpatialIndex> Reference<I> {
                         continue;
                     }
                 }
-                if merge.surface_band > 0.0 {
-                    let reach = info.spacing.max(resolution) + merge.surface_band;
+                let band = merge.surface_band;
+                if band > 0.0 && band.is_finite() {
+                    let reach = info.spacing.max(resolution) + band;
                     // Against the surfaces held before this scan: its own samples are its
                     // surface, not a second look at one.
                     if let Some(n) = self.index.nearest_within(p, reach * reach)
                         && (n.id as usize) < held
-                        && (self.surface_foot(n.id, p) - p).norm() <= merge.surface_band
+                        && (self.surface_foot(n.id, p) - p).norm() <= band
                     {
                         continue;
                     }

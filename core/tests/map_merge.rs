@@ -138,15 +138,19 @@ fn a_surface_band_keeps_the_same_points_in_every_index() {
 }
 
 #[test]
-fn a_band_of_zero_keeps_every_point_the_spacing_keeps() {
-    let off = Merge {
-        surface_band: 0.0,
-        ..banded()
-    };
-    assert_eq!(
-        revisits(off).index().points(),
-        revisits(Merge::spacing(0.01)).index().points()
-    );
+fn a_band_that_is_not_finite_and_positive_keeps_every_point_the_spacing_keeps() {
+    let spacing_only = revisits(Merge::spacing(0.01));
+    for band in [f64::NAN, f64::INFINITY, -0.005] {
+        let off = Merge {
+            surface_band: band,
+            ..banded()
+        };
+        assert_eq!(
+            revisits(off).index().points(),
+            spacing_only.index().points(),
+            "band {band}"
+        );
+    }
 }
 
 /// A scan whose every beam hits the wall `y = 1` (x from −1 to 1), seen from `(x0, 0)`.
@@ -173,7 +177,9 @@ fn a_point_off_the_surface_by_more_than_the_band_still_enters() {
     assert_eq!(insert(&mut map, 0.0, 0.0), 41);
     // The same wall seen again 5 mm off, from a little aside: nothing new.
     assert_eq!(insert(&mut map, 0.01, 0.005), 0);
-    // A copy 3 cm off the wall (a wrong match, or a second surface) enters whole.
+    // A copy 1.5 cm off the wall, within reach of the held samples but off their surface by
+    // more than the band, enters whole; so does one 3 cm off.
+    assert_eq!(insert(&mut map, 0.0, 0.015), 41);
     assert_eq!(insert(&mut map, 0.0, 0.03), 41);
     // The wall seen farther along: what lies beyond its end (x ≈ 0.255) is new ground.
     let mut fresh = Reference::new(QuadTree::default());

@@ -348,7 +348,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// A pipeline named `kind` (for reports), with the defaults of the TOML registry: the
     /// odometry prior of [`MotionModel::default`], the checks of
     /// [`ValidationParams::default`] and [`CorrelativeParams::default`], and the matcher's own
-    /// map resolution where `policy` leaves it unset. `noise` is the laser's
+    /// map resolution and surface band where `policy` leaves them unset. `noise` is the laser's
     /// (`[matcher.laser]` in TOML), held by the reference for every matcher. `Pipeline::new(..)` with default
     /// parameters and `Registry::config(name)?.build()` give the same poses.
     pub fn new(

@@ -91,8 +91,9 @@ impl Seek for Target {
 
 /// Gives `file`, which is to replace `path`, the permission bits of the regular file at `path`
 /// (setuid, setgid and sticky bits dropped) and, where the process may, its owner and group:
-/// replacing an output keeps who may read it. A link at `path` is replaced by a new file
-/// (never written through), which gets the permissions of a new file.
+/// replacing an output keeps who may read it, and never lets more read it (a group the writer
+/// cannot give the file to loses its bits). A link at `path` is replaced by a new file (never
+/// written through), which gets the permissions of a new file.
 fn keep_owner_and_mode(path: &Path, file: &std::fs::File) -> std::io::Result<()> {
     use std::os::unix::fs::{MetadataExt, PermissionsExt};
     let Ok(old) = std::fs::symlink_metadata(path) else {
@@ -102,13 +103,24 @@ fn keep_owner_and_mode(path: &Path, file: &std::fs::File) -> std::io::Result<()>
         return Ok(());
     }
     // Owner first: changing it may clear permission bits, which are then set.
-    match std::os::unix::fs::fchown(file, Some(old.uid()), Some(old.gid())) {
+    let permission_denied = |r: &std::io::Result<()>| matches!(r, Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied);
+    let mut mode = old.mode() & 0o777;
+    let both = std::os::unix::fs::fchown(file, Some(old.uid()), Some(old.gid()));
+    if permission_denied(&both) {
         // Only a privileged process may give a file away; the new file is then the writer's,
-        // as an output written in place by another user would be.
-        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {}
-        other => other?,
+        // as an output written in place by another user would be. It keeps the old group
+        // where the writer belongs to it; where not, the group's bits are dropped rather
+        // than granted to the writer's own group.
+        let group = std::os::unix::fs::fchown(file, None, Some(old.gid()));
+        if permission_denied(&group) {
+            mode &= !0o070;
+        } else {
+            group?;
+        }
+    } else {
+        both?;
     }
-    file.set_permissions(std::fs::Permissions::from_mode(old.mode() & 0o777))
+    file.set_permissions(std::fs::Permissions::from_mode(mode))
 }
 
 /// True when `path` (its link followed) is a device, a pipe or a socket.
@@ -455,16 +467,14 @@ mod tests {
             assert_eq!(std::fs::read_to_string(&path).expect("read"), "new");
             std::fs::remove_file(&path).expect("removed");
         }
-        // A fresh output gets an ordinary new file's permissions, not tempfile's 0600.
+        // A fresh output gets an ordinary new file's permissions (0644 less the umask), not
+        // tempfile's 0600: those of a file the standard library creates beside it.
         let fresh = dir.path().join("fresh.tum");
         write_atomic(&fresh, b"new").expect("written");
-        let mode = std::fs::metadata(&fresh).expect("file").mode() & 0o777;
-        assert_eq!(mode & 0o644, mode, "{mode:o}");
-        assert_ne!(
-            mode & 0o044,
-            0,
-            "{mode:o}: readable by others unless the umask says no"
-        );
+        let ordinary = dir.path().join("ordinary.tum");
+        std::fs::write(&ordinary, "new").expect("written");
+        let mode = |p: &Path| std::fs::metadata(p).expect("file").mode() & 0o777;
+        assert_eq!(mode(&fresh), mode(&ordinary) & 0o644, "{:o}", mode(&fresh));
         // The owner is kept where the process may give files away (root).
         let path = dir.path().join("summary.json");
         std::fs::write(&path, "old").expect("written");
