@@ -28,6 +28,19 @@ const STEERING_COMMON: &[&str] = &[
     "correlative.window_deg",
 ];
 
+/// Steering parameters that act only on a map (what enters it, how dense it grows, what is
+/// withheld from it): a scan-to-scan reference is replaced by every relevant scan whatever
+/// they say, so they are not swept there, where each variant would repeat the default run.
+const MAP_ONLY: &[&str] = &[
+    "relevance.map_resolution",
+    "relevance.surface_band_sigmas",
+    "relevance.max_cell_points",
+    "relevance.window_scans",
+    "relevance.min_novelty",
+    "relevance.novelty_distance",
+    "validation.max_odometry_chi2",
+];
+
 /// Steering parameters that act only through another one: each is left out of the sweep
 /// while the parameter it serves is 0 (off), as scaling it would change nothing.
 const SERVES: &[(&str, &str)] = &[
@@ -40,7 +53,8 @@ impl MatcherConfig {
     /// thresholds, the map's density bound, the noise and motion models, and the algorithm's
     /// own steering parameters), as dotted keys such as `"matcher.icp.max_dist_start"`.
     /// Parameters whose value is 0 are left out: scaling them changes nothing; so are those
-    /// that serve a parameter which is 0 (the novelty distance without the novelty gate).
+    /// that serve a parameter which is 0 (the novelty distance without the novelty gate), and,
+    /// for a scan-to-scan reference, those that act only on a map.
     #[must_use]
     pub fn steering_parameters(&self) -> Vec<String> {
         let Ok(value) = self.to_table() else {
@@ -56,8 +70,10 @@ impl MatcherConfig {
             .iter()
             .filter(|p| p.steering && self.algorithm.weighs_by_laser_noise())
             .map(|p| format!("laser.{}", p.key));
+        let map = self.reference.is_map();
         STEERING_COMMON
             .iter()
+            .filter(|k| map || !MAP_ONLY.contains(k))
             .map(|k| k.to_string())
             .chain(own)
             .chain(laser)

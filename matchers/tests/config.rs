@@ -213,6 +213,21 @@ fn steering_parameters_scale_one_at_a_time() {
             }
         }
     }
+    // A map's own parameters are swept for map matchers only: scan to scan they change
+    // nothing.
+    for key in [
+        "matcher.relevance.map_resolution",
+        "matcher.relevance.surface_band_sigmas",
+        "matcher.validation.max_odometry_chi2",
+    ] {
+        let has = |kind| {
+            MatcherConfig::defaults(kind)
+                .steering_parameters()
+                .contains(&key.to_string())
+        };
+        assert!(has(MatcherKind::QWsm) && has(MatcherKind::KdWsm), "{key}");
+        assert!(!has(MatcherKind::Wsm) && !has(MatcherKind::Idc), "{key}");
+    }
     // A parameter that only serves one that is off is not swept; it is once that one is on.
     let mut gated = MatcherConfig::defaults(MatcherKind::QWsm);
     let novelty = "matcher.relevance.novelty_distance".to_string();
