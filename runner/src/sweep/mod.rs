@@ -103,6 +103,42 @@ pub struct SweepReport {
     pub median_ratio: Option<f64>,
     /// Relations of the default run with a translational error above 0.5 m.
     pub relations_over_0_5_m: usize,
+    /// Variants whose `trans_mean` exceeds the bound max([`BOUND_FACTOR`] × the default's,
+    /// [`BOUND_FLOOR_M`]): the fragile ones.
+    pub variants_over_bound: usize,
+    /// The geometric mean of the variants' `trans_mean` (m): one figure for the whole sweep
+    /// that a single lucky or unlucky variant moves less than the worst ratio, and a lucky
+    /// default does not move at all (the ratios do).
+    pub variants_geomean_trans_mean: Option<f64>,
+}
+
+/// A variant is fragile when its mean error exceeds this many times the default's…
+pub const BOUND_FACTOR: f64 = 2.0;
+/// … and this many metres.
+pub const BOUND_FLOOR_M: f64 = 0.05;
+
+/// How many of `variants` exceed the bound around `default_trans_mean` (see
+/// [`SweepReport::variants_over_bound`]), and the geometric mean of their mean errors (of
+/// those that ran with a positive, finite error).
+#[must_use]
+pub fn robustness_figures(
+    default_trans_mean: f64,
+    variants: &[VariantReport],
+) -> (usize, Option<f64>) {
+    let bound = (BOUND_FACTOR * default_trans_mean).max(BOUND_FLOOR_M);
+    let errors: Vec<f64> = variants
+        .iter()
+        .filter_map(|v| v.figures.as_ref().map(|f| f.trans_mean))
+        .collect();
+    // An error that is not a number counts as over: it is no evidence of robustness.
+    let over = errors.iter().filter(|&&e| e > bound || e.is_nan()).count();
+    let logs: Vec<f64> = errors
+        .iter()
+        .filter(|e| e.is_finite() && **e > 0.0)
+        .map(|e| e.ln())
+        .collect();
+    let geomean = (!logs.is_empty()).then(|| (logs.iter().sum::<f64>() / logs.len() as f64).exp());
+    (over, geomean)
 }
 
 /// The runs of a sweep: the default, then one per variant, in report order.
@@ -228,6 +264,15 @@ pub fn table(report: &SweepReport) -> String {
             .map_or_else(|| "-".to_string(), |r| fmt_f(r, 2)),
         report.relations_over_0_5_m,
         report.default.relations
+    );
+    let _ = writeln!(
+        out,
+        "{} of {} variants over max({BOUND_FACTOR} × default, {BOUND_FLOOR_M} m); geometric mean of the variants' trans_mean {} m",
+        report.variants_over_bound,
+        report.variants.len(),
+        report
+            .variants_geomean_trans_mean
+            .map_or_else(|| "-".to_string(), |g| fmt_f(g, 4)),
     );
     out
 }
@@ -365,6 +410,8 @@ pub fn report(
     let median_ratio = median(&ratios.iter().map(|r| r.0).collect::<Vec<_>>());
     let worst_ratio = worst.map(|w| w.0);
     let worst_variant = worst.map(|w| w.1.to_string());
+    let (variants_over_bound, variants_geomean_trans_mean) =
+        robustness_figures(default.trans_mean, &variants);
     SweepReport {
         log: input.log.clone(),
         matcher: config.kind(),
@@ -375,6 +422,8 @@ pub fn report(
         worst_ratio,
         worst_variant,
         median_ratio,
+        variants_over_bound,
+        variants_geomean_trans_mean,
         variants,
     }
 }

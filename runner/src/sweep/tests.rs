@@ -265,3 +265,61 @@ fn parallel_results_are_in_item_order_and_panics_are_errors() {
         }
     }
 }
+
+fn variant_with(name: &str, trans_mean: Option<f64>) -> VariantReport {
+    VariantReport {
+        name: name.to_string(),
+        figures: trans_mean.map(|trans_mean| RunFigures {
+            trans_mean,
+            trans_max: trans_mean,
+            rot_mean_deg: 0.0,
+            ms_per_scan_median: 1.0,
+            map_points: 0,
+            scans: 10,
+            relations: 10,
+            relations_missing: 0,
+            relations_over_0_5_m: 0,
+        }),
+        ratio: None,
+        error: trans_mean.is_none().then(|| "could not run".to_string()),
+    }
+}
+
+#[test]
+fn robustness_figures_count_the_variants_over_the_bound_and_their_geometric_mean() {
+    // Seeded random sweeps, against a count and a product computed one variant at a time.
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    for _ in 0..200 {
+        let default = rng.random_range(0.001..0.2);
+        let variants: Vec<VariantReport> = (0..rng.random_range(0..40))
+            .map(|i| {
+                let ran = rng.random_range(0.0..1.0) < 0.9;
+                variant_with(&format!("v{i}"), ran.then(|| rng.random_range(0.001..1.0)))
+            })
+            .collect();
+        let (over, geomean) = robustness_figures(default, &variants);
+        let bound = f64::max(2.0 * default, 0.05);
+        let ran: Vec<f64> = variants
+            .iter()
+            .filter_map(|v| v.figures.as_ref().map(|f| f.trans_mean))
+            .collect();
+        assert_eq!(over, ran.iter().filter(|&&e| e > bound).count());
+        match geomean {
+            None => assert!(ran.is_empty()),
+            Some(g) => {
+                let product: f64 = ran.iter().product();
+                let expected = product.powf(1.0 / ran.len() as f64);
+                assert!((g - expected).abs() <= 1e-9 * expected, "{g} vs {expected}");
+            }
+        }
+    }
+    // The bound's floor: at a 1 cm default a variant at 4 cm is within it, one at 6 cm over.
+    let (over, _) = robustness_figures(
+        0.01,
+        &[variant_with("a", Some(0.04)), variant_with("b", Some(0.06))],
+    );
+    assert_eq!(over, 1);
+    // A variant whose error is not a number is over any bound.
+    let (over, geomean) = robustness_figures(0.01, &[variant_with("nan", Some(f64::NAN))]);
+    assert_eq!((over, geomean), (1, None));
+}
