@@ -7,40 +7,37 @@ use crate::config::{ConfigError, LASER_PARAMETERS, MatcherConfig};
 /// ones a robustness sweep perturbs (`qicp sweep`), with each algorithm's own steering
 /// parameters ([`Param::steering`](crate::Param::steering)) and, for an algorithm that weighs by
 /// it, the laser's range noise. Keys are dotted paths below `[matcher]`.
-const STEERING_COMMON: &[&str] = &[
-    "icp.max_dist_start",
-    "icp.max_dist_end",
-    "relevance.tau_max",
-    "relevance.rho_max_deg",
-    "relevance.map_resolution",
-    "relevance.surface_band_sigmas",
-    "relevance.max_cell_points",
-    "relevance.window_scans",
-    "relevance.min_novelty",
-    "relevance.novelty_distance",
-    "motion.sigma_xy_per_m",
-    "motion.sigma_theta_per_m_deg",
-    "validation.inlier_distance",
-    "validation.max_share_drop",
-    "validation.max_residual_ratio",
-    "validation.max_odometry_chi2",
-    "correlative.window_xy",
-    "correlative.window_deg",
+const STEERING_COMMON: &[(&str, Acts)] = &[
+    ("icp.max_dist_start", Acts::Any),
+    ("icp.max_dist_end", Acts::Any),
+    ("relevance.tau_max", Acts::Any),
+    ("relevance.rho_max_deg", Acts::Any),
+    ("relevance.map_resolution", Acts::Map),
+    ("relevance.surface_band_sigmas", Acts::Map),
+    ("relevance.max_cell_points", Acts::Map),
+    ("relevance.window_scans", Acts::Map),
+    ("relevance.min_novelty", Acts::Map),
+    ("relevance.novelty_distance", Acts::Map),
+    ("motion.sigma_xy_per_m", Acts::Any),
+    ("motion.sigma_theta_per_m_deg", Acts::Any),
+    ("validation.inlier_distance", Acts::Any),
+    ("validation.max_share_drop", Acts::Any),
+    ("validation.max_residual_ratio", Acts::Any),
+    ("validation.max_odometry_chi2", Acts::Map),
+    ("correlative.window_xy", Acts::Any),
+    ("correlative.window_deg", Acts::Any),
 ];
 
-/// Steering parameters that act only on a map (what enters it, how dense it grows, what is
-/// withheld from it): a scan-to-scan reference is replaced by every relevant scan whatever
-/// they say, so they are not swept there, where each variant would repeat the default run.
-const MAP_ONLY: &[&str] = &[
-    "relevance.map_resolution",
-    "relevance.surface_band_sigmas",
-    "relevance.max_cell_points",
-    "relevance.window_scans",
-    "relevance.min_novelty",
-    "relevance.novelty_distance",
-    "validation.max_odometry_chi2",
-];
-
+/// Where a steering parameter acts.
+#[derive(Clone, Copy, PartialEq)]
+enum Acts {
+    /// On every matcher.
+    Any,
+    /// Only on a map (what enters it, how dense it grows, what is withheld from it): a
+    /// scan-to-scan reference is replaced by every relevant scan whatever these say, so they
+    /// are not swept there, where each variant would repeat the default run.
+    Map,
+}
 /// Steering parameters that act only through another one: each is left out of the sweep
 /// while the parameter it serves is 0 (off), as scaling it would change nothing.
 const SERVES: &[(&str, &str)] = &[
@@ -73,8 +70,8 @@ impl MatcherConfig {
         let map = self.reference.is_map();
         STEERING_COMMON
             .iter()
-            .filter(|k| map || !MAP_ONLY.contains(k))
-            .map(|k| k.to_string())
+            .filter(|(_, acts)| map || *acts == Acts::Any)
+            .map(|(k, _)| k.to_string())
             .chain(own)
             .chain(laser)
             .map(|k| format!("matcher.{k}"))
