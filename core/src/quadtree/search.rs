@@ -109,25 +109,19 @@ impl<const B: usize> QuadTreeN<B> {
         let (dx2, dy2) = (dx * dx, dy * dy);
         let c = node.children;
         self.descend(c + q, cell.child(q), qx, qy, ox2, oy2, bound, visit_leaf);
-        // The two edge neighbours, nearer first, then the diagonal one.
-        let (across_x, across_y) = (q ^ 1, q ^ 2);
-        if dx2 <= dy2 {
-            if dx2 + oy2 <= bound() {
-                let k = cell.child(across_x);
-                self.descend(c + across_x, k, qx, qy, dx2, oy2, bound, visit_leaf);
-            }
-            if ox2 + dy2 <= bound() {
-                let k = cell.child(across_y);
-                self.descend(c + across_y, k, qx, qy, ox2, dy2, bound, visit_leaf);
-            }
+        // The two edge neighbours, nearer first (each with its squared offsets), then the
+        // diagonal one.
+        let across_x = (q ^ 1, dx2, oy2);
+        let across_y = (q ^ 2, ox2, dy2);
+        let edges = if dx2 <= dy2 {
+            [across_x, across_y]
         } else {
-            if ox2 + dy2 <= bound() {
-                let k = cell.child(across_y);
-                self.descend(c + across_y, k, qx, qy, ox2, dy2, bound, visit_leaf);
-            }
-            if dx2 + oy2 <= bound() {
-                let k = cell.child(across_x);
-                self.descend(c + across_x, k, qx, qy, dx2, oy2, bound, visit_leaf);
+            [across_y, across_x]
+        };
+        for (child, ex2, ey2) in edges {
+            if ex2 + ey2 <= bound() {
+                let k = cell.child(child);
+                self.descend(c + child, k, qx, qy, ex2, ey2, bound, visit_leaf);
             }
         }
         if dx2 + dy2 <= bound() {
