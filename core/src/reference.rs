@@ -373,9 +373,15 @@ impl<I: SpatialIndex> Reference<I> {
             if let Some(merge) = merge {
                 let resolution = merge.resolution;
                 let reach = info.spacing.max(resolution);
+                let band = merge.surface_band;
+                let banded = band > 0.0 && band.is_finite();
+                // One search serves both rules: the nearest point within the spacing's reach
+                // is the nearest within the band's wider one.
+                let search = if banded { reach + band } else { reach };
+                let nearest = self.index.nearest_within(p, search * search);
                 // The nearest held point learns how finely its surface has been seen, whether
                 // or not this point is kept (the spacing's and the band's skips alike).
-                if let Some(n) = self.index.nearest_within(p, reach * reach) {
+                if let Some(n) = nearest.filter(|n| n.dist_sq <= reach * reach) {
                     let d = n.dist_sq.sqrt().max(1e-4);
                     info.spacing = info.spacing.min(d);
                     let other = &mut self.info[n.id as usize];
@@ -384,17 +390,14 @@ impl<I: SpatialIndex> Reference<I> {
                         continue;
                     }
                 }
-                let band = merge.surface_band;
-                if band > 0.0 && band.is_finite() {
-                    let reach = info.spacing.max(resolution) + band;
-                    // Against the surfaces held before this scan: its own samples are its
-                    // surface, not a second look at one.
-                    if let Some(n) = self.index.nearest_within(p, reach * reach)
-                        && (n.id as usize) < held
-                        && (self.surface_foot(n.id, p) - p).norm() <= band
-                    {
-                        continue;
-                    }
+                // Against the surfaces held before this scan: its own samples are its
+                // surface, not a second look at one.
+                if banded
+                    && let Some(n) = nearest
+                    && (n.id as usize) < held
+                    && (self.surface_foot(n.id, p) - p).norm() <= band
+                {
+                    continue;
                 }
                 cell = merge.cell(p);
                 if cell.is_some_and(|c| {
