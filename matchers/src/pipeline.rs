@@ -34,11 +34,12 @@ pub struct Relevance {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub map_resolution: Option<f64>,
     /// A new point within this many laser range-noise σ (`matcher.laser.sigma_range`) of the
-    /// surface through its nearest map point is not inserted ([`Merge::surface_band`]): the
-    /// map holds that surface already, so a wall seen again stays one sample thick instead of
-    /// thickening into a band of the laser's noise on every visit, and the map grows with
-    /// the area explored. Unlike the cell cap it never stops a second copy of a wall that
-    /// lies off the first by more than the noise. 0 inserts such points, as Alg. 1 reads.
+    /// surface through its nearest map point, when that point was held before the scan, is
+    /// not inserted ([`Merge::surface_band`]): the map holds that surface already, so a wall
+    /// seen again thickens far less on each visit (points farther off still enter: the map's
+    /// growth slows, it does not stop). Unlike the cell cap it never stops a second copy of a
+    /// wall that lies off the first by more than the noise. 0 inserts such points, as Alg. 1
+    /// reads.
     /// Default (`None`): the matcher's own [`ScanMatcher::surface_band_sigmas`], 1 (1 cm for
     /// the default laser; the Intel map holds 109,785 points instead of 159,906 for q-wsm),
     /// and 0 for IDC, whose matching-range rule needs every sample (see the README).
