@@ -1,7 +1,7 @@
 //! `qicp convert LOG OUT.mcap`: a CARMEN log as a ROS 2 bag (MCAP storage), for ROS tools
 //! and for `qicp match` on bags.
 
-use crate::logs::carmen::{CarmenOptions, DEFAULT_MAX_BEAMS};
+use crate::logs::carmen::{CarmenOptions, DEFAULT_MAX_BEAMS, RecordOrder};
 use crate::logs::{LogOptions, LogReader};
 use crate::matching::{BagOutput, progress_spinner};
 use anyhow::{Result, bail};
@@ -34,6 +34,10 @@ pub fn run(args: ConvertArgs) -> Result<()> {
         carmen: CarmenOptions {
             lenient: args.lenient,
             max_beams: args.max_beams,
+            // A bag's messages go in time order, and a bag's odometry is interpolated at
+            // each scan's stamp from the samples around it: a log whose stamps jitter
+            // against its file order (Intel's) is sorted by time here.
+            order: RecordOrder::Time,
             ..CarmenOptions::default()
         },
         ..LogOptions::default()

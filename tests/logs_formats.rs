@@ -5,7 +5,9 @@
 use bzip2::Compression;
 use bzip2::write::BzEncoder;
 use qicp::logs::LogError;
-use qicp::logs::carmen::{CarmenLog, CarmenOptions, read_carmen, read_carmen_from, write_carmen};
+use qicp::logs::carmen::{
+    CarmenLog, CarmenOptions, RecordOrder, read_carmen, read_carmen_from, write_carmen,
+};
 use qicp::logs::tum::{read_tum, write_tum};
 use qicp_core::{BeamGeometry, BeamStatus, Pose2, Record, Scan, normalize_angle};
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -167,9 +169,9 @@ fn defaults_without_params_and_any_beam_count() {
     }
 }
 
-#[test]
-fn unsorted_input_is_sorted_stably() {
-    let text = [
+/// Laser lines whose timestamps run back, and two ODOM lines out of order.
+fn jittered_log() -> String {
+    [
         flaser(&[1.0; 3], (3.0, 0.0, 0.0), 3.0),
         flaser(&[1.0; 3], (1.0, 0.0, 0.0), 1.0),
         flaser(&[1.0; 3], (2.0, 0.0, 0.0), 2.0),
@@ -177,8 +179,35 @@ fn unsorted_input_is_sorted_stably() {
         "ODOM 9 0 0 0 0 0 9 h 9".to_string(),
         "ODOM 8 0 0 0 0 0 8 h 8".to_string(),
     ]
-    .join("\n");
-    let log = read_str(&text, &CarmenOptions::default()).unwrap();
+    .join("\n")
+}
+
+#[test]
+fn records_come_in_file_order_by_default_and_jitter_is_counted() {
+    let log = read_str(&jittered_log(), &CarmenOptions::default()).unwrap();
+    let seen: Vec<(f64, f64)> = log
+        .records
+        .iter()
+        .map(|r| (r.timestamp(), r.odometry.x))
+        .collect();
+    assert_eq!(seen, [(3.0, 3.0), (1.0, 1.0), (2.0, 2.0), (2.0, 2.5)]);
+    assert_eq!(log.info.out_of_order, 1);
+    assert_eq!(log.info.late, 0);
+    assert_eq!(log.info.span, Some((1.0, 3.0)));
+    assert!(
+        log.report()
+            .contains("out of time order (kept in file order)")
+    );
+    assert_eq!(log.odometry[0].0, 8.0, "ODOM lines are sorted by time");
+}
+
+#[test]
+fn time_order_sorts_records_stably() {
+    let opts = CarmenOptions {
+        order: RecordOrder::Time,
+        ..CarmenOptions::default()
+    };
+    let log = read_str(&jittered_log(), &opts).unwrap();
     let seen: Vec<(f64, f64)> = log
         .records
         .iter()
@@ -186,7 +215,7 @@ fn unsorted_input_is_sorted_stably() {
         .collect();
     assert_eq!(seen, [(1.0, 1.0), (2.0, 2.0), (2.0, 2.5), (3.0, 3.0)]);
     assert_eq!(log.info.out_of_order, 1);
-    assert_eq!(log.odometry[0].0, 8.0);
+    assert!(log.report().contains("out of time order (sorted)"));
 }
 
 #[test]

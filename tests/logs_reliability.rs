@@ -14,6 +14,8 @@ const STRICT: CarmenOptions = CarmenOptions {
     laser_offset: None,
     truepos_max_dt: qicp::logs::carmen::DEFAULT_TRUEPOS_MAX_DT,
     max_beams: qicp::logs::carmen::DEFAULT_MAX_BEAMS,
+    // The reorder tests here sort by time; file order is the default (tests/logs_formats.rs).
+    order: qicp::logs::carmen::RecordOrder::Time,
     reorder_window: qicp::logs::carmen::DEFAULT_REORDER_WINDOW,
     reorder_records: qicp::logs::carmen::DEFAULT_REORDER_RECORDS,
 };

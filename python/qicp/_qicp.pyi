@@ -1,7 +1,7 @@
 """Type stubs of the qicp extension module."""
 
 from os import PathLike
-from typing import Iterator, Optional, Sequence, Tuple, Union, final
+from typing import Iterator, Literal, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -150,8 +150,15 @@ class Matcher:
     def map_points(self) -> npt.NDArray[np.float64]:
         """The reference's points (a boosted matcher's whole map) as an N×2 array (m)."""
 
-def read_carmen(path: _StrPath, *, lenient: bool = False, max_beams: int = 10000) -> Log:
-    """Streams the laser records of a CARMEN log (plain or bzip2) in time order."""
+def read_carmen(
+    path: _StrPath,
+    *,
+    lenient: bool = False,
+    max_beams: int = 10000,
+    order: Literal["file", "time"] = "file",
+) -> Log:
+    """Streams the laser records of a CARMEN log (plain or bzip2), in file order (the order
+    the laser took them) or, with ``order="time"``, sorted by time."""
 
 def read_bag(
     path: _StrPath,

@@ -5,7 +5,7 @@ use crate::{QicpError, lock, pose_tuple, refusal};
 use numpy::PyArray1;
 use pyo3::prelude::*;
 use qicp_core::Record;
-use qicp_io::carmen::{CarmenOptions, CarmenReader, DEFAULT_MAX_BEAMS};
+use qicp_io::carmen::{CarmenOptions, CarmenReader, DEFAULT_MAX_BEAMS, RecordOrder};
 use qicp_io::rosbag::{BagOptions, OdometrySource, is_mcap};
 use qicp_io::{LogOptions, LogReader};
 use std::path::PathBuf;
@@ -116,15 +116,32 @@ impl Log {
     }
 }
 
-/// Streams the laser records of a CARMEN log (plain or bzip2), in time order, as `qicp match`
-/// reads them: an iterator of `Record`. A malformed line raises `QicpError` naming its line
-/// (with `lenient=True` it is skipped and counted); a log without a laser record raises too.
+/// Streams the laser records of a CARMEN log (plain or bzip2) as `qicp match` reads them, in
+/// file order (`order="file"`, the order the laser took them) or sorted by time
+/// (`order="time"`, as `qicp convert` writes a bag): an iterator of `Record`. A malformed line
+/// raises `QicpError` naming its line (with `lenient=True` it is skipped and counted); a log
+/// without a laser record raises too.
 #[pyfunction]
-#[pyo3(signature = (path, *, lenient = false, max_beams = DEFAULT_MAX_BEAMS))]
-pub(crate) fn read_carmen(path: PathBuf, lenient: bool, max_beams: usize) -> PyResult<Log> {
+#[pyo3(signature = (path, *, lenient = false, max_beams = DEFAULT_MAX_BEAMS, order = "file"))]
+pub(crate) fn read_carmen(
+    path: PathBuf,
+    lenient: bool,
+    max_beams: usize,
+    order: &str,
+) -> PyResult<Log> {
+    let order = match order {
+        "file" => RecordOrder::File,
+        "time" => RecordOrder::Time,
+        other => {
+            return Err(QicpError::new_err(format!(
+                "order {other:?}: use \"file\" or \"time\""
+            )));
+        }
+    };
     let options = CarmenOptions {
         lenient,
         max_beams,
+        order,
         ..CarmenOptions::default()
     };
     let reader = CarmenReader::open(&path, &options).map_err(refusal)?;

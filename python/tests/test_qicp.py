@@ -147,6 +147,8 @@ def test_bad_input_raises_instead_of_crashing(tmp_path):
         list(qicp.read_carmen(bad))
     with pytest.raises(qicp.QicpError):
         qicp.read_carmen(tmp_path / "missing.clf")
+    with pytest.raises(qicp.QicpError, match="order"):
+        qicp.read_carmen(bad, order="sideways")
     m = qicp.Matcher("wsm")
     with pytest.raises(qicp.QicpError, match="max_range"):
         m.process([1.0, 2.0], -0.5, 0.1, odometry=(0, 0, 0), timestamp=0.0, range_max=math.inf)

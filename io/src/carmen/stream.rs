@@ -1,5 +1,6 @@
 //! [`CarmenReader`]: a CARMEN log streamed in time order through a bounded reorder window.
 
+use super::RecordOrder;
 use super::fields::{
     Layout, Parsed, RawLaser, parse_flaser, parse_odom, parse_param, parse_robotlaser1,
     parse_truepos,
@@ -15,8 +16,10 @@ use std::collections::BinaryHeap;
 use std::io::BufRead;
 use std::path::Path;
 
-/// A laser record waiting in the reorder buffer, ordered by time and then by line.
+/// A laser record waiting in the buffer, ordered by `key` (its time, or 0 in file order) and
+/// then by line.
 struct Pending {
+    key: f64,
     timestamp: f64,
     line: usize,
     record: Record,
@@ -35,21 +38,22 @@ impl PartialOrd for Pending {
 }
 impl Ord for Pending {
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.timestamp
-            .total_cmp(&other.timestamp)
+        self.key
+            .total_cmp(&other.key)
             .then(self.line.cmp(&other.line))
     }
 }
 
-/// Streams the laser records of a CARMEN log in time order, one at a time, in memory bounded
-/// by the reorder window (not by the log's length).
+/// Streams the laser records of a CARMEN log in the order of [`CarmenOptions::order`] (file
+/// order by default), one at a time, in memory bounded by the reorder window (not by the log's
+/// length).
 ///
-/// Laser lines out of time order (Intel's jitter by up to 0.6 s) are put back in order within
-/// [`CarmenOptions::reorder_window`] seconds or [`CarmenOptions::reorder_records`] records,
-/// whichever fills first; a line later than that is dropped and counted in [`LogInfo::late`].
-/// Within the window the order is that of [`read_carmen`]: by time, ties in file order.
-/// `TRUEPOS` lines attach to the laser record nearest in time within
-/// [`CarmenOptions::truepos_max_dt`]. `PARAM`s that shape `FLASER` scans must come before the
+/// Records wait in a buffer of [`CarmenOptions::reorder_window`] seconds or
+/// [`CarmenOptions::reorder_records`] records, whichever fills first, for the `TRUEPOS` lines
+/// that attach to the laser record nearest in time within [`CarmenOptions::truepos_max_dt`].
+/// With [`RecordOrder::Time`] laser lines out of time order (Intel's jitter by up to 0.6 s)
+/// are put back in order within that buffer, by time with ties in file order, and a line
+/// later than that is dropped and counted in [`LogInfo::late`]; in file order none is. `PARAM`s that shape `FLASER` scans must come before the
 /// first `FLASER` line or repeat its values; a later change is an error, as the scans before
 /// it would have been read with another layout.
 ///
@@ -107,7 +111,10 @@ impl<R: BufRead> CarmenReader<R> {
             reader,
             name: name.to_string(),
             opts: opts.clone(),
-            info: LogInfo::default(),
+            info: LogInfo {
+                order: opts.order,
+                ..LogInfo::default()
+            },
             buf: Vec::with_capacity(4096),
             line_no: 0,
             pending: BinaryHeap::new(),
@@ -255,7 +262,8 @@ impl<R: BufRead> CarmenReader<R> {
             self.info.out_of_order += 1;
         }
         self.last_laser_time = l.timestamp;
-        if l.timestamp < self.delivered {
+        let by_time = self.opts.order == RecordOrder::Time;
+        if by_time && l.timestamp < self.delivered {
             self.info.late += 1;
             return Ok(false);
         }
@@ -298,6 +306,7 @@ impl<R: BufRead> CarmenReader<R> {
             Ok(scan) => {
                 self.newest = self.newest.max(l.timestamp);
                 self.pending.push(Reverse(Pending {
+                    key: if by_time { l.timestamp } else { 0.0 },
                     timestamp: l.timestamp,
                     line: l.line,
                     record: Record {
@@ -316,7 +325,8 @@ impl<R: BufRead> CarmenReader<R> {
         }
     }
 
-    /// Whether the earliest buffered record can go: nothing earlier can come any more.
+    /// Whether the first buffered record can go: in time order nothing earlier can come any
+    /// more, and no `TRUEPOS` line near it.
     fn ready(&self) -> bool {
         self.pending.peek().is_some_and(|Reverse(p)| {
             self.done
@@ -325,16 +335,20 @@ impl<R: BufRead> CarmenReader<R> {
         })
     }
 
-    /// Delivers the earliest buffered record with its ground truth.
+    /// Delivers the first buffered record with its ground truth.
     fn deliver(&mut self) -> Option<Record> {
         let Reverse(p) = self.pending.pop()?;
         let mut record = p.record;
         let t = p.timestamp;
         let max_dt = self.opts.truepos_max_dt;
         record.truth = nearest(&self.truepos, t, max_dt).map(|(_, pose)| pose);
-        // Later records are no earlier than t: what lies beyond max_dt before it is done with.
-        let old = self.truepos.partition_point(|(s, _)| *s < t - max_dt);
-        self.truepos.drain(..old);
+        if self.opts.order == RecordOrder::Time {
+            // Later records are no earlier than t: what lies beyond max_dt before it is done
+            // with. (In file order the window's horizon, as each TRUEPOS line arrives, bounds
+            // what is kept.)
+            let old = self.truepos.partition_point(|(s, _)| *s < t - max_dt);
+            self.truepos.drain(..old);
+        }
         self.delivered = t;
         self.info.records += 1;
         self.info.span = Some(match self.info.span {
@@ -342,7 +356,7 @@ impl<R: BufRead> CarmenReader<R> {
                 self.info.first_beams = record.scan.beams();
                 (t, t)
             }
-            Some((first, _)) => (first, t),
+            Some((first, last)) => (first.min(t), last.max(t)),
         });
         Some(record)
     }
