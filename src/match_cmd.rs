@@ -1,13 +1,14 @@
 //! `qicp match LOG --matcher KIND [--config FILE] --out DIR`.
 
 use crate::eval::{RelationProbe, evaluate_relations};
-use crate::logs::carmen::CarmenOptions;
+use crate::logs::carmen::{CarmenOptions, RecordOrder};
 use crate::logs::relations::read_relations;
 use crate::logs::rosbag::{BagOptions, OdometrySource};
 use crate::logs::{LogOptions, LogReader};
 use crate::matching::{BagOutput, MatchLoop, RunWriter, progress_spinner};
 use anyhow::{Context, Result, bail};
 use qicp_matchers::MatcherConfig;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Arguments of `qicp match`.
@@ -33,6 +34,10 @@ pub struct MatchArgs {
     /// Readings a laser line may announce at most; longer lines are malformed.
     #[arg(long, default_value_t = crate::logs::carmen::DEFAULT_MAX_BEAMS)]
     pub max_beams: usize,
+    /// The order of a CARMEN log's records: as the file gives them (the order the laser took
+    /// them), or sorted by timestamp (as `qicp convert` writes a bag).
+    #[arg(long, value_enum, default_value_t = LogOrder::File)]
+    pub order: LogOrder,
     /// Freiburg relations file: score the trajectory and add the figures to summary.json.
     #[arg(long)]
     pub relations: Option<PathBuf>,
@@ -50,6 +55,35 @@ pub struct MatchArgs {
     /// Take the scans from the iceoryx2 bridge instead of a log.
     #[command(flatten)]
     pub bridge: crate::bridge_cmd::SubscribeArgs,
+}
+
+/// The order of a CARMEN log's records ([`RecordOrder`]), as `--order` and an experiment's
+/// `[source] order` give it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogOrder {
+    /// File order: the order the laser took them.
+    #[default]
+    File,
+    /// Sorted by timestamp.
+    Time,
+}
+
+impl LogOrder {
+    /// True for the default, file order.
+    #[must_use]
+    pub fn is_file(&self) -> bool {
+        *self == LogOrder::File
+    }
+}
+
+impl From<LogOrder> for RecordOrder {
+    fn from(order: LogOrder) -> Self {
+        match order {
+            LogOrder::File => RecordOrder::File,
+            LogOrder::Time => RecordOrder::Time,
+        }
+    }
 }
 
 /// Where a ROS 2 bag's scans and odometry are (ignored for CARMEN logs).
@@ -154,6 +188,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
     let options = args.bag.log_options(CarmenOptions {
         lenient: args.lenient,
         max_beams: args.max_beams,
+        order: args.order.into(),
         ..CarmenOptions::default()
     });
     let mut reader = LogReader::open(log_path, &options)?;

@@ -57,7 +57,8 @@ fn an_experiment_on_a_converted_bag_scores_like_the_log() {
         std::fs::write(
             &config,
             format!(
-                "[source]\nlog = {:?}\nrelations = {:?}\nmax_scans = 600\n\n[run]\nmatchers = [\"wsm\"]\n",
+                // In time order, as `qicp convert` writes the bag.
+                "[source]\nlog = {:?}\nrelations = {:?}\nmax_scans = 600\norder = \"time\"\n\n[run]\nmatchers = [\"wsm\"]\n",
                 log,
                 relations()
             ),

@@ -54,6 +54,10 @@ pub struct SourceConfig {
     /// Skip and count malformed log lines instead of failing (log only). Default false.
     #[serde(default)]
     pub lenient: bool,
+    /// The order of a CARMEN log's records: `"file"` (the order the laser took them) or
+    /// `"time"` (sorted by timestamp, as `qicp convert` writes a bag). Default `"file"`.
+    #[serde(default, skip_serializing_if = "crate::match_cmd::LogOrder::is_file")]
+    pub order: crate::match_cmd::LogOrder,
 }
 
 impl SourceConfig {
@@ -80,6 +84,7 @@ impl SourceConfig {
         crate::logs::LogOptions {
             carmen: CarmenOptions {
                 lenient: self.lenient,
+                order: self.order.into(),
                 ..CarmenOptions::default()
             },
             bag: BagOptions::new(
