@@ -1,8 +1,9 @@
 //! The whole Intel Research Lab log through the matchers, scored with the Freiburg benchmark
 //! relations. Reads `../shared/data/intel/` (never copied into the project).
 //!
-//! Measured (mean translational error): q-wsm 0.032 m, q-idc 0.028 m, wsm 0.56 m, raw odometry
-//! 7.37 m; published: scan matching 0.220 m, RBPF SLAM 0.070 m, graph SLAM 0.031 m.
+//! Measured (mean translational error, records in file order): q-wsm 0.027 m, q-idc 0.029 m,
+//! wsm 0.46 m, idc 0.18 m, raw odometry 7.37 m; published: scan matching 0.220 m, RBPF SLAM
+//! 0.070 m, graph SLAM 0.031 m.
 
 use qicp::eval::evaluate_relations;
 use qicp::logs::carmen::{CarmenOptions, read_carmen};
@@ -37,7 +38,7 @@ fn score(kind: MatcherKind) -> (f64, f64, usize, BTreeMap<String, usize>) {
 fn q_wsm_on_intel_beats_rbpf_slam() {
     let (trans, rot, fallbacks, reasons) = score(MatcherKind::QWsm);
     // RBPF SLAM scores 0.070 m, graph SLAM 0.031 m; boosted scan matching alone scores
-    // 0.032 m and must stay below 0.05 m.
+    // 0.027 m and must stay below 0.05 m.
     assert!(trans < 0.05, "q-wsm mean translational error {trans:.4} m");
     assert!(rot < 1.0, "q-wsm mean rotational error {rot:.3}°");
     // Besides the first scan, only matches the validation refused (2 of 13,631) keep the
@@ -57,10 +58,19 @@ fn wsm_on_intel_beats_a_c_scan_matcher() {
     assert!(trans < 0.82, "wsm mean translational error {trans:.4} m");
 }
 
+/// Scan to scan, IDC meets the robustness issue's 0.30 m with the records in the order the
+/// laser took them (0.183 m); sorted by their jittered timestamps it scored 0.440 m.
+#[test]
+fn idc_scan_to_scan_on_intel_in_file_order_stays_under_0_3_m() {
+    let (trans, rot, _, _) = score(MatcherKind::Idc);
+    assert!(trans < 0.30, "idc mean translational error {trans:.4} m");
+    assert!(rot < 1.5, "idc mean rotational error {rot:.3}°");
+}
+
 #[test]
 fn q_idc_on_intel_beats_rbpf_slam() {
     let (trans, rot, _, _) = score(MatcherKind::QIdc);
-    // Scores 0.028 m; parameters near the defaults have given up to 0.71 m (README, Known
+    // Scores 0.029 m; parameters near the defaults have given up to 0.71 m (README, Known
     // limits), so the bound is the target rather than a tight one.
     assert!(trans < 0.10, "q-idc mean translational error {trans:.4} m");
     assert!(rot < 1.0, "q-idc mean rotational error {rot:.3}°");
