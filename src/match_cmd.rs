@@ -225,6 +225,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
     let mut summary = serde_json::to_value(matcher.summary())?;
     summary["skipped_lines"] = reader.skipped_lines().into();
     summary["late_lines"] = reader.dropped().into();
+    summary["out_of_order_lines"] = reader.out_of_order().into();
     let mut unscored = None;
     if let (Some(relations), Some(probe), Some(path)) = (&relations, &probe, &args.relations) {
         let report = evaluate_relations(&probe.trajectory(), relations, RELATIONS_MAX_DT)?;

@@ -37,6 +37,10 @@ pub struct SweepArgs {
     /// Skip and count malformed log lines instead of failing.
     #[arg(long)]
     pub lenient: bool,
+    /// The order of a CARMEN log's records: as the file gives them (the order the laser took
+    /// them), or sorted by timestamp.
+    #[arg(long, value_enum, default_value_t = crate::match_cmd::LogOrder::File)]
+    pub order: crate::match_cmd::LogOrder,
     /// Also write each run's trajectory to DIR/<run>.tum (e.g. default.tum, scans-2.tum), to
     /// see where a variant goes wrong (`qicp eval relations DIR/scans-2.tum RELATIONS`).
     #[arg(long, value_name = "DIR")]
@@ -53,7 +57,12 @@ pub fn run(args: SweepArgs) -> Result<()> {
         Some(names) => select_variants(all, names)?,
         None => all,
     };
-    let mut input = SweepInput::load(&args.log, &args.relations, args.scans, args.lenient)?;
+    let carmen = crate::logs::carmen::CarmenOptions {
+        lenient: args.lenient,
+        order: args.order.into(),
+        ..crate::logs::carmen::CarmenOptions::default()
+    };
+    let mut input = SweepInput::load_with(&args.log, &args.relations, args.scans, carmen)?;
     if let Some(dir) = &args.trajectories {
         input = input.with_trajectories(dir)?;
     }

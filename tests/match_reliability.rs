@@ -434,3 +434,47 @@ fn signals_inherited_as_ignored_stay_ignored() {
     );
     assert!(left.is_empty(), "left behind: {left:?}");
 }
+
+/// The times of `trajectory.tum`'s poses, in the file's order.
+fn trajectory_times(out: &Path) -> Vec<f64> {
+    std::fs::read_to_string(out.join("trajectory.tum"))
+        .expect("trajectory written")
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            l.split_whitespace()
+                .next()
+                .and_then(|t| t.parse().ok())
+                .expect("a time")
+        })
+        .collect()
+}
+
+#[test]
+fn match_keeps_file_order_unless_told_to_sort_by_time() {
+    let dir = scratch();
+    let log = file(
+        &dir.path(),
+        "jitter.clf",
+        &[1.0, 1.2, 1.6, 1.4, 1.8, 2.0]
+            .iter()
+            .map(|&t| flaser(t))
+            .collect::<String>(),
+    );
+    let (in_file, by_time) = (dir.path().join("file"), dir.path().join("time"));
+    let o = match_wsm(&log, &in_file, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("1 laser lines of") && stderr(&o).contains("matched in file order"),
+        "{}",
+        stderr(&o)
+    );
+    let summary = std::fs::read_to_string(in_file.join("summary.json")).expect("summary");
+    assert!(summary.contains("\"out_of_order_lines\": 1"), "{summary}");
+    assert_eq!(trajectory_times(&in_file), [1.0, 1.2, 1.6, 1.4, 1.8, 2.0]);
+    let o = match_wsm(&log, &by_time, &["--order", "time"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(trajectory_times(&by_time), [1.0, 1.2, 1.4, 1.6, 1.8, 2.0]);
+    let o = match_wsm(&log, &dir.path().join("bad"), &["--order", "sideways"]);
+    assert!(!o.status.success());
+}

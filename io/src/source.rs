@@ -85,6 +85,16 @@ impl LogReader {
         }
     }
 
+    /// Laser lines whose timestamp runs back against the line before (CARMEN; 0 for bags):
+    /// matched in file order, or sorted with [`RecordOrder::Time`](crate::carmen::RecordOrder).
+    #[must_use]
+    pub fn out_of_order(&self) -> usize {
+        match self {
+            Self::Carmen(r) => r.info.out_of_order,
+            Self::Bag(_) => 0,
+        }
+    }
+
     /// Prints the warnings of the read on stderr (skips and drops).
     pub fn warn(&self, path: &Path) {
         match self {

@@ -259,12 +259,22 @@ impl LogInfo {
         s
     }
 
-    /// Warnings a command prints on stderr: skipped and dropped lines.
+    /// Warnings a command prints on stderr: skipped and dropped lines, and a note on lines
+    /// out of time order kept in file order.
     pub fn warn(&self, path: &Path) {
         if self.skipped_lines > 0 {
             eprintln!(
                 "warning: skipped {} malformed lines of {} (--lenient)",
                 self.skipped_lines,
+                path.display()
+            );
+        }
+        if self.out_of_order > 0 && self.order == RecordOrder::File {
+            eprintln!(
+                "note: {} laser lines of {} are stamped earlier than the line before them; they \
+                 are matched in file order, the order the laser took them (--order time sorts \
+                 them)",
+                self.out_of_order,
                 path.display()
             );
         }

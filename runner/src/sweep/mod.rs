@@ -305,6 +305,20 @@ impl SweepInput {
         scans: Option<NonZeroUsize>,
         lenient: bool,
     ) -> Result<Self> {
+        let carmen = CarmenOptions {
+            lenient,
+            ..CarmenOptions::default()
+        };
+        Self::load_with(log, relations, scans, carmen)
+    }
+
+    /// [`SweepInput::load`] with a CARMEN log read as `carmen` says (its record order, say).
+    pub fn load_with(
+        log: &Path,
+        relations: &Path,
+        scans: Option<NonZeroUsize>,
+        carmen: CarmenOptions,
+    ) -> Result<Self> {
         let relations_name = relations.display().to_string();
         let relations = read_relations(relations)
             .with_context(|| format!("reading relations {relations_name}"))?;
@@ -312,10 +326,7 @@ impl SweepInput {
             bail!("{relations_name} holds no relations");
         }
         let options = LogOptions {
-            carmen: CarmenOptions {
-                lenient,
-                ..CarmenOptions::default()
-            },
+            carmen,
             ..LogOptions::default()
         };
         let mut probe = RelationProbe::new(&relations, MAX_DT)?;
