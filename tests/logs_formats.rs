@@ -182,15 +182,21 @@ fn jittered_log() -> String {
     .join("\n")
 }
 
+/// Each record's time and odometry x, in the order read.
+fn times_and_x(log: &CarmenLog) -> Vec<(f64, f64)> {
+    log.records
+        .iter()
+        .map(|r| (r.timestamp(), r.odometry.x))
+        .collect()
+}
+
 #[test]
 fn records_come_in_file_order_by_default_and_jitter_is_counted() {
     let log = read_str(&jittered_log(), &CarmenOptions::default()).unwrap();
-    let seen: Vec<(f64, f64)> = log
-        .records
-        .iter()
-        .map(|r| (r.timestamp(), r.odometry.x))
-        .collect();
-    assert_eq!(seen, [(3.0, 3.0), (1.0, 1.0), (2.0, 2.0), (2.0, 2.5)]);
+    assert_eq!(
+        times_and_x(&log),
+        [(3.0, 3.0), (1.0, 1.0), (2.0, 2.0), (2.0, 2.5)]
+    );
     assert_eq!(log.info.out_of_order, 1);
     assert_eq!(log.info.late, 0);
     assert_eq!(log.info.span, Some((1.0, 3.0)));
@@ -208,12 +214,10 @@ fn time_order_sorts_records_stably() {
         ..CarmenOptions::default()
     };
     let log = read_str(&jittered_log(), &opts).unwrap();
-    let seen: Vec<(f64, f64)> = log
-        .records
-        .iter()
-        .map(|r| (r.timestamp(), r.odometry.x))
-        .collect();
-    assert_eq!(seen, [(1.0, 1.0), (2.0, 2.0), (2.0, 2.5), (3.0, 3.0)]);
+    assert_eq!(
+        times_and_x(&log),
+        [(1.0, 1.0), (2.0, 2.0), (2.0, 2.5), (3.0, 3.0)]
+    );
     assert_eq!(log.info.out_of_order, 1);
     assert!(log.report().contains("out of time order (sorted)"));
 }
