@@ -207,6 +207,39 @@ fn records_come_in_file_order_by_default_and_jitter_is_counted() {
     assert_eq!(log.odometry[0].0, 8.0, "ODOM lines are sorted by time");
 }
 
+/// In file order a record whose stamp runs back still finds its `TRUEPOS`, given before or
+/// after it in the file: the truths of the window are kept, not those after the record
+/// delivered last.
+#[test]
+fn jittered_records_in_file_order_keep_their_ground_truth() {
+    let text = [
+        flaser(&[1.0; 3], (0.0, 0.0, 0.0), 2.0),
+        "TRUEPOS 20 0 0 0 0 0 2.0 h 2.0".to_string(),
+        "TRUEPOS 15 0 0 0 0 0 1.5 h 1.5".to_string(),
+        flaser(&[1.0; 3], (0.0, 0.0, 0.0), 1.5),
+        flaser(&[1.0; 3], (0.0, 0.0, 0.0), 3.0),
+        "TRUEPOS 30 0 0 0 0 0 3.0 h 3.0".to_string(),
+    ]
+    .join("\n");
+    for order in [RecordOrder::File, RecordOrder::Time] {
+        let opts = CarmenOptions {
+            order,
+            ..CarmenOptions::default()
+        };
+        let log = read_str(&text, &opts).unwrap();
+        let truths: Vec<(f64, f64)> = log
+            .records
+            .iter()
+            .map(|r| (r.timestamp(), r.truth.expect("a truth").x))
+            .collect();
+        let want: &[(f64, f64)] = match order {
+            RecordOrder::File => &[(2.0, 20.0), (1.5, 15.0), (3.0, 30.0)],
+            RecordOrder::Time => &[(1.5, 15.0), (2.0, 20.0), (3.0, 30.0)],
+        };
+        assert_eq!(truths, want, "{order:?}");
+    }
+}
+
 #[test]
 fn time_order_sorts_records_stably() {
     let opts = CarmenOptions {

@@ -1,4 +1,5 @@
-//! [`CarmenReader`]: a CARMEN log streamed in time order through a bounded reorder window.
+//! [`CarmenReader`]: a CARMEN log streamed record by record, in file order or (sorted by time)
+//! through a bounded reorder window.
 
 use super::RecordOrder;
 use super::fields::{
@@ -53,9 +54,10 @@ impl Ord for Pending {
 /// that attach to the laser record nearest in time within [`CarmenOptions::truepos_max_dt`].
 /// With [`RecordOrder::Time`] laser lines out of time order (Intel's jitter by up to 0.6 s)
 /// are put back in order within that buffer, by time with ties in file order, and a line
-/// later than that is dropped and counted in [`LogInfo::late`]; in file order none is. `PARAM`s that shape `FLASER` scans must come before the
-/// first `FLASER` line or repeat its values; a later change is an error, as the scans before
-/// it would have been read with another layout.
+/// later than that is dropped and counted in [`LogInfo::late`]; in file order none is.
+/// `PARAM`s that shape `FLASER` scans must come before the first `FLASER` line or repeat
+/// their values; a later change is an error, as the scans before it would have been read with
+/// another layout.
 ///
 /// After an error the iterator ends.
 pub struct CarmenReader<R> {
