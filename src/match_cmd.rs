@@ -58,7 +58,8 @@ pub struct MatchArgs {
 }
 
 /// The order of a CARMEN log's records ([`RecordOrder`]), as `--order` and an experiment's
-/// `[source] order` give it.
+/// `[source] order` give it: `RecordOrder` with clap's and serde's derives, which `qicp-io`
+/// does without (its names are [`RecordOrder::name`]'s).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LogOrder {
@@ -317,4 +318,22 @@ pub fn listing(registry: &qicp_matchers::Registry) -> Result<String> {
     writeln!(out, "names (--matcher NAME, [matcher] kind = NAME):")?;
     writeln!(out, "  {}", registry.names().join(", "))?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod order_tests {
+    use super::LogOrder;
+    use crate::logs::carmen::RecordOrder;
+    use clap::ValueEnum;
+
+    #[test]
+    fn the_command_lines_order_names_are_the_readers() {
+        for order in LogOrder::value_variants() {
+            let name = order.to_possible_value().expect("a name");
+            let record = RecordOrder::from(*order);
+            assert_eq!(name.get_name(), record.name());
+            assert_eq!(name.get_name().parse::<RecordOrder>(), Ok(record));
+        }
+        assert!("sideways".parse::<RecordOrder>().is_err());
+    }
 }

@@ -129,15 +129,7 @@ pub(crate) fn read_carmen(
     max_beams: usize,
     order: &str,
 ) -> PyResult<Log> {
-    let order = match order {
-        "file" => RecordOrder::File,
-        "time" => RecordOrder::Time,
-        other => {
-            return Err(QicpError::new_err(format!(
-                "order {other:?}: use \"file\" or \"time\""
-            )));
-        }
-    };
+    let order: RecordOrder = order.parse().map_err(QicpError::new_err)?;
     let options = CarmenOptions {
         lenient,
         max_beams,

@@ -84,6 +84,29 @@ pub enum RecordOrder {
     Time,
 }
 
+impl RecordOrder {
+    /// The order's name where a user gives it: `"file"` or `"time"`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            RecordOrder::File => "file",
+            RecordOrder::Time => "time",
+        }
+    }
+}
+
+impl std::str::FromStr for RecordOrder {
+    type Err = String;
+
+    /// `"file"` or `"time"`; anything else is refused with the two names.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        [RecordOrder::File, RecordOrder::Time]
+            .into_iter()
+            .find(|o| o.name() == s)
+            .ok_or_else(|| format!("order {s:?}: use \"file\" or \"time\""))
+    }
+}
+
 /// How to read a CARMEN log.
 ///
 /// Fields left `None` come from the log's `PARAM` lines, else from the documented default:
