@@ -240,6 +240,8 @@ pub struct Reference<I> {
     index: I,
     info: Vec<PointInfo>,
     scans: usize,
+    /// True once a scan was merged into it ([`Reference::is_map`]).
+    merged: bool,
     /// Points per cell of the cell cap ([`Merge::max_cell_points`]).
     cells: HashMap<(i64, i64), u32>,
     /// The noise of the laser whose scans enter, and of the scans matched against them.
@@ -263,6 +265,7 @@ impl<I: SpatialIndex> Reference<I> {
             index,
             info: Vec::new(),
             scans: 0,
+            merged: false,
             cells: HashMap::new(),
             noise,
         }
@@ -304,6 +307,15 @@ impl<I: SpatialIndex> Reference<I> {
         self.scans
     }
 
+    /// True when scans are merged into this reference (a map: [`Reference::insert_scan`]
+    /// with `Some(merge)` since the last clear), false for a scan as reference. A map's older
+    /// passes are off from the current estimate by the drift since they were seen, which one
+    /// step's odometry does not bound; a matcher may gate them differently.
+    #[must_use]
+    pub fn is_map(&self) -> bool {
+        self.merged
+    }
+
     /// The point of the reference surface through point `id` closest to `p`: the sample slid
     /// along its tangent, at most one sample spacing either way (a polyline through the
     /// samples). The sample itself where its normal is unknown.
@@ -330,6 +342,7 @@ impl<I: SpatialIndex> Reference<I> {
         self.index.clear();
         self.info.clear();
         self.scans = 0;
+        self.merged = false;
         self.cells.clear();
     }
 
@@ -414,6 +427,7 @@ impl<I: SpatialIndex> Reference<I> {
             inserted += 1;
         }
         self.scans += 1;
+        self.merged |= merge.is_some();
         Ok(inserted)
     }
 }

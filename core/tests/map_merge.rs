@@ -201,3 +201,27 @@ fn a_point_off_the_surface_by_more_than_the_band_still_enters() {
         "{new} new, {past_the_end} past the end"
     );
 }
+
+#[test]
+fn a_reference_is_a_map_once_a_scan_is_merged_into_it_until_cleared() {
+    let world = SyntheticWorld::room();
+    let scan = world.scan(&Pose2::IDENTITY, 0.005, 1);
+    let mut reference = Reference::new(QuadTree::default());
+    assert!(!reference.is_map(), "empty");
+    reference
+        .insert_scan(&scan, &Pose2::IDENTITY, None)
+        .expect("finite points");
+    assert!(!reference.is_map(), "a scan as reference");
+    let merged = Merge::spacing(0.01);
+    reference
+        .insert_scan(&scan, &Pose2::new(0.02, 0.0, 0.0), Some(merged))
+        .expect("finite points");
+    assert!(reference.is_map(), "a scan merged in");
+    reference.clear();
+    assert!(!reference.is_map(), "cleared");
+    // The first scan of a map is merged too: a map is a map from its first scan on.
+    reference
+        .insert_scan(&scan, &Pose2::IDENTITY, Some(merged))
+        .expect("finite points");
+    assert!(reference.is_map(), "a map of one scan");
+}

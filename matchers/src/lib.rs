@@ -54,7 +54,7 @@ pub use config::{
 pub use correlative::{Candidate, CorrelativeParams, CorrelativeSearch};
 pub use icp::IcpParams;
 pub use idc::{Idc, IdcAlgorithm, IdcParams};
-pub use params::{Param, Range};
+pub use params::{Acts, Param, Range};
 pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance};
 pub use policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 pub use registry::{Algorithm, AnyIndex, IndexEntry, Metric, ReferenceEntry, Registry};

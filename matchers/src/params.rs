@@ -54,6 +54,31 @@ impl Range {
     }
 }
 
+/// The references a steering parameter acts on, so that a robustness sweep perturbs it only
+/// where it changes something.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Acts {
+    /// Every reference.
+    Any,
+    /// Only a map (what enters it, how dense it grows, how it is matched).
+    Map,
+    /// Only a scan as reference.
+    Scan,
+}
+
+impl Acts {
+    /// True when a parameter that acts here changes a matcher whose reference is a map
+    /// (`map`) or a scan.
+    #[must_use]
+    pub fn on(self, map: bool) -> bool {
+        match self {
+            Acts::Any => true,
+            Acts::Map => map,
+            Acts::Scan => !map,
+        }
+    }
+}
+
 /// One declared parameter of an algorithm's section.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Param {
@@ -66,6 +91,8 @@ pub struct Param {
     /// Whether it steers matching or map building: the robustness sweep (`qicp sweep`)
     /// multiplies each steering parameter by 0.7 and 1.4.
     pub steering: bool,
+    /// The references it acts on ([`Acts::Any`] unless declared with [`Param::acting_on`]).
+    pub acts: Acts,
 }
 
 impl Param {
@@ -77,6 +104,7 @@ impl Param {
             doc,
             range,
             steering: false,
+            acts: Acts::Any,
         }
     }
 
@@ -88,7 +116,14 @@ impl Param {
             doc,
             range,
             steering: true,
+            acts: Acts::Any,
         }
+    }
+
+    /// This parameter, acting only on the references `acts` names.
+    #[must_use]
+    pub const fn acting_on(self, acts: Acts) -> Self {
+        Self { acts, ..self }
     }
 }
 

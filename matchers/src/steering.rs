@@ -2,11 +2,15 @@
 //! [`MatcherConfig`] steer matching and map building, read and scaled by dotted key.
 
 use crate::config::{ConfigError, LASER_PARAMETERS, MatcherConfig};
+use crate::params::Acts;
 
 /// The numeric parameters of the shared sections that steer matching and map building: the
 /// ones a robustness sweep perturbs (`qicp sweep`), with each algorithm's own steering
 /// parameters ([`Param::steering`](crate::Param::steering)) and, for an algorithm that weighs by
-/// it, the laser's range noise. Keys are dotted paths below `[matcher]`.
+/// it, the laser's range noise. Keys are dotted paths below `[matcher]`. Those that act only
+/// on a map ([`Acts::Map`]: what enters it, how dense it grows, what is withheld from it) are
+/// not swept for a scan-to-scan reference, which every relevant scan replaces whatever they
+/// say, so that each variant would repeat the default run.
 const STEERING_COMMON: &[(&str, Acts)] = &[
     ("icp.max_dist_start", Acts::Any),
     ("icp.max_dist_end", Acts::Any),
@@ -28,16 +32,6 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("correlative.window_deg", Acts::Any),
 ];
 
-/// Where a steering parameter acts.
-#[derive(Clone, Copy, PartialEq)]
-enum Acts {
-    /// On every matcher.
-    Any,
-    /// Only on a map (what enters it, how dense it grows, what is withheld from it): a
-    /// scan-to-scan reference is replaced by every relevant scan whatever these say, so they
-    /// are not swept there, where each variant would repeat the default run.
-    Map,
-}
 /// Steering parameters that act only through another one: each is left out of the sweep
 /// while the parameter it serves is 0 (off), as scaling it would change nothing.
 const SERVES: &[(&str, &str)] = &[
@@ -51,26 +45,26 @@ impl MatcherConfig {
     /// own steering parameters), as dotted keys such as `"matcher.icp.max_dist_start"`.
     /// Parameters whose value is 0 are left out: scaling them changes nothing; so are those
     /// that serve a parameter which is 0 (the novelty distance without the novelty gate), and,
-    /// for a scan-to-scan reference, those that act only on a map.
+    /// those that act only on another kind of reference ([`Param::acting_on`](crate::Param::acting_on)).
     #[must_use]
     pub fn steering_parameters(&self) -> Vec<String> {
         let Ok(value) = self.to_table() else {
             return Vec::new();
         };
+        let map = self.reference.is_map();
         let own = self
             .algorithm
             .parameters()
             .iter()
-            .filter(|p| p.steering)
+            .filter(|p| p.steering && p.acts.on(map))
             .map(|p| format!("{}.{}", self.algorithm.name(), p.key));
         let laser = LASER_PARAMETERS
             .iter()
             .filter(|p| p.steering && self.algorithm.weighs_by_laser_noise())
             .map(|p| format!("laser.{}", p.key));
-        let map = self.reference.is_map();
         STEERING_COMMON
             .iter()
-            .filter(|(_, acts)| map || *acts == Acts::Any)
+            .filter(|(_, acts)| acts.on(map))
             .map(|(k, _)| k.to_string())
             .chain(own)
             .chain(laser)

@@ -58,6 +58,28 @@ fn its_section_is_checked_like_a_built_in_one() {
     assert!((scaled.parameter("matcher.plicp.sigma").unwrap() - 0.042).abs() < 1e-12);
 }
 
+/// The first gate is set per reference (`gate_sigmas` against a scan, `map_gate_sigmas`
+/// against a map): the sweep perturbs each only where it acts, so no variant repeats the
+/// default run.
+#[test]
+fn each_first_gate_is_swept_only_on_the_reference_it_acts_on() {
+    let r = registry();
+    let config = |text: &str| r.parse(text).expect("valid");
+    let plicp = config("[matcher]\nkind = \"plicp\"\n[matcher.plicp]\nmap_gate_sigmas = 2\n");
+    let q_plicp = config("[matcher]\nkind = \"q-plicp\"\n[matcher.plicp]\nmap_gate_sigmas = 2\n");
+    let swept = |c: &qicp_matchers::MatcherConfig, key: &str| {
+        c.steering_parameters()
+            .iter()
+            .any(|k| k == &format!("matcher.plicp.{key}"))
+    };
+    assert!(swept(&plicp, "gate_sigmas") && !swept(&plicp, "map_gate_sigmas"));
+    assert!(!swept(&q_plicp, "gate_sigmas") && swept(&q_plicp, "map_gate_sigmas"));
+    assert!(
+        swept(&plicp, "sigma") && swept(&q_plicp, "sigma"),
+        "the others act on both"
+    );
+}
+
 fn drive(kind: &str) -> Vec<Pose2> {
     let world = SyntheticWorld::room();
     let mut pipeline = registry().config(kind).unwrap().build().unwrap();
