@@ -12,7 +12,8 @@ pub use qicp_io as logs;
 pub mod bridge_cmd;
 pub mod convert_cmd;
 pub mod eval_cmd;
-pub mod experiment;
+/// Experiments (`qicp run`): the `qicp-experiment` crate.
+pub use qicp_experiment as experiment;
 pub mod match_cmd;
 /// The pictures: the `qicp-plots` crate.
 pub use qicp_plots as plots;

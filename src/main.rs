@@ -53,7 +53,7 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Replay(a) => bridge_cmd::run_replay(a),
-        Command::Run(a) => experiment::run(a),
+        Command::Run(a) => experiment::run(&a, qicp::registry()),
         Command::Sim(a) => sim_cmd::run(a),
         Command::Sweep(a) => sweep_cmd::run(a),
     }

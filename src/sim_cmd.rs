@@ -140,7 +140,7 @@ fn load_drive(path: &Path) -> Result<SimConfig> {
     if !is_experiment {
         return SimConfig::load(path).with_context(|| format!("drive {}", path.display()));
     }
-    let experiment = crate::experiment::ExperimentConfig::load(path)?;
+    let experiment = crate::experiment::ExperimentConfig::load(path, crate::registry())?;
     let Some(sim) = &experiment.source.sim else {
         anyhow::bail!(
             "{}: an experiment whose source is a log, not a drive to simulate",

@@ -26,7 +26,7 @@ pub enum Records {
         /// The log file.
         path: PathBuf,
         /// How to read it.
-        options: Box<crate::logs::LogOptions>,
+        options: Box<qicp_io::LogOptions>,
         /// Records the experiment uses (the first ones).
         scans: usize,
         /// The file's length and modification time when it was counted: every pass checks
@@ -70,7 +70,7 @@ impl Source {
             });
             (name, Records::Held(records), truth)
         } else if let Some(log) = &c.log {
-            let prefix = if crate::logs::rosbag::is_mcap(log) {
+            let prefix = if qicp_io::rosbag::is_mcap(log) {
                 "bag"
             } else {
                 "log"
@@ -81,7 +81,7 @@ impl Source {
             // simulated drive's are.
             let identity = file_identity(log)?;
             let mut held = Vec::new();
-            let mut reader = crate::logs::LogReader::open(log, &options)
+            let mut reader = qicp_io::LogReader::open(log, &options)
                 .with_context(|| format!("reading {}", log.display()))?;
             // The true poses the records carry: kept only while every record has one.
             let mut carried: Option<Vec<Stamped>> = Some(Vec::new());
@@ -161,7 +161,7 @@ impl Source {
                 if file_identity(path)?.as_ref() != Some(identity) {
                     return Err(changed());
                 }
-                let reader = crate::logs::LogReader::open(path, options)
+                let reader = qicp_io::LogReader::open(path, options)
                     .with_context(|| format!("reading {}", path.display()))?;
                 let mut read = 0;
                 for record in reader.take(*scans) {
@@ -212,7 +212,7 @@ impl Scores {
 
     /// Scores a trajectory from its parts: `whole` against the truth (required when the source
     /// has truth) and `near_relations` (at least the poses nearest the relations' times, as
-    /// a [`RelationProbe`](crate::eval::RelationProbe) picks them) against the relations
+    /// a [`RelationProbe`](qicp_eval::RelationProbe) picks them) against the relations
     /// (required when it has relations).
     pub fn of_parts(
         whole: Option<&[Stamped]>,
@@ -229,7 +229,7 @@ impl Scores {
         let relations = match &source.relations {
             Some(rel) => {
                 let traj = near_relations.context("no poses for the relations")?;
-                let r = evaluate_relations(traj, rel, crate::eval::DEFAULT_MAX_DT)?;
+                let r = evaluate_relations(traj, rel, qicp_eval::DEFAULT_MAX_DT)?;
                 if r.n == 0 {
                     eprintln!(
                         "warning: none of the {} relations falls on this log's times: \
@@ -405,7 +405,7 @@ pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> Value {
         m.insert("certainty_per_scan_mean".into(), json!(mean));
         m.insert(
             "certainty_per_scan_median".into(),
-            json!(crate::matching::quantile(&per_scan, 0.5)),
+            json!(qicp_runner::matching::quantile(&per_scan, 0.5)),
         );
         out.insert(format!("{}/{}", b.kind(), inc), Value::Object(m));
     }

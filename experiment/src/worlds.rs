@@ -44,6 +44,7 @@ pub(super) fn spread(values: &[f64]) -> Value {
 /// `qicp run --worlds N`: the experiment on N layouts of the simulated world.
 pub(super) fn run_worlds(
     args: &RunArgs,
+    registry: &Registry,
     config: &ExperimentConfig,
     out: &Path,
     n: usize,
@@ -70,7 +71,7 @@ pub(super) fn run_worlds(
         c.source.seed = Some(first_noise + k as u64);
         let dir = out.join(format!("world-{seed}"));
         summaries.push(
-            run_once(args, &c, &dir, false, Instant::now())
+            run_once(args, registry, &c, &dir, false, Instant::now())
                 .with_context(|| format!("world seed {seed}"))?,
         );
     }

@@ -1,5 +1,11 @@
-//! `qicp run CONFIG`: one experiment end to end. Simulate (or load) a drive, run every
-//! matcher over the same records, score them, write the results and draw the paper's figures.
+//! # qicp-experiment
+//!
+//! Experiments, as `qicp run CONFIG` runs them: simulate (or load) a drive, run every
+//! matcher over the same records, concurrently, score them, write the results and draw the
+//! paper's figures. Matcher names resolve in the [`Registry`] the caller gives (`qicp` gives
+//! its own: the built-ins and PL-ICP).
+//!
+//! An experiment file:
 //!
 //! ```toml
 //! [source]
@@ -45,15 +51,17 @@
 //! for each matcher's map picture, so memory holds the matchers' maps, not the log (see
 //! `stream` for the little that grows with the scans).
 
-use crate::eval::{AteOptions, AteReport, RelationsReport, evaluate_ate, evaluate_relations};
-use crate::logs::carmen::CarmenOptions;
-use crate::logs::relations::{Relation, read_relations};
-use crate::logs::tum::{Stamped, write_tum};
-use crate::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_run};
-use crate::plots::{self, Panel, PathSeries, ScanSeries};
+#![warn(missing_docs)]
+
 use anyhow::{Context, Result};
 use qicp_core::{Pose2, Record};
-use qicp_matchers::MatcherConfig;
+use qicp_eval::{AteOptions, AteReport, RelationsReport, evaluate_ate, evaluate_relations};
+use qicp_io::carmen::CarmenOptions;
+use qicp_io::relations::{Relation, read_relations};
+use qicp_io::tum::{Stamped, write_tum};
+use qicp_matchers::{MatcherConfig, Registry};
+use qicp_plots::{self as plots, Panel, PathSeries, ScanSeries};
+use qicp_runner::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_run};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;
@@ -74,34 +82,36 @@ use worlds::run_worlds;
 /// The matchers an experiment runs when `[run] matchers` is not given.
 pub const DEFAULT_MATCHERS: [&str; 5] = ["idc", "q-idc", "wsm", "q-wsm", "kd-wsm"];
 
-/// Arguments of `qicp run`.
-#[derive(Debug, clap::Args)]
+/// What `qicp run` is given: the experiment and how to run it (with the `clap` feature, its
+/// command-line arguments).
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct RunArgs {
     /// The experiment's TOML file, e.g. `configs/park.toml`.
     pub config: PathBuf,
     /// Output directory (created if missing). Default `out/<config stem>`.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub out: Option<PathBuf>,
     /// Print summary.json on stdout (instead of the table).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub json: bool,
     /// Print nothing but errors.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub quiet: bool,
     /// Use this CARMEN log instead of the config's source (relations and ground truth of the
     /// config are kept).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub log: Option<PathBuf>,
     /// Override `[source] max_scans`.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub max_scans: Option<usize>,
     /// Repeat the experiment on this many simulated worlds (layout and noise seeds from the
     /// config's upwards) and report medians.
-    #[arg(long, value_name = "N")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "N"))]
     pub worlds: Option<usize>,
     /// Matchers run at once, one per thread (default: every core). Results do not depend on
     /// it; only the per-scan times do, as matchers share the machine.
-    #[arg(long, value_name = "N")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "N"))]
     pub jobs: Option<std::num::NonZeroUsize>,
 }
 
@@ -112,6 +122,7 @@ pub struct RunArgs {
 /// `pictures`, gathers its map picture's bounds), so memory holds `jobs` maps, not the log.
 fn run_matchers(
     config: &ExperimentConfig,
+    registry: &Registry,
     source: &Source,
     out: &Path,
     jobs: usize,
@@ -121,7 +132,7 @@ fn run_matchers(
     let kinds = &config.run.matchers;
     let one = |kind: &String, progress: bool| -> Result<MatcherOutcome> {
         let t = Instant::now();
-        let matcher = config.matcher(kind)?;
+        let matcher = config.matcher(kind, registry)?;
         let dir = out.join(kind);
         let Records::Held(records) = &source.records else {
             return stream::run_streamed(source, &matcher, &dir, progress, pictures);
@@ -186,10 +197,10 @@ fn run_matchers(
 }
 
 /// Runs the command.
-pub fn run(args: RunArgs) -> Result<()> {
-    crate::matching::remove_on_signal()?;
+pub fn run(args: &RunArgs, registry: &Registry) -> Result<()> {
+    qicp_runner::matching::remove_on_signal()?;
     let started = Instant::now();
-    let mut config = ExperimentConfig::load(&args.config)?;
+    let mut config = ExperimentConfig::load(&args.config, registry)?;
     if let Some(log) = &args.log {
         config.source.sim = None;
         config.source.seed = None;
@@ -202,7 +213,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     if args.max_scans.is_some() {
         config.source.max_scans = args.max_scans;
     }
-    config.validate()?;
+    config.validate(registry)?;
     let out = args.out.clone().unwrap_or_else(|| {
         let stem = args
             .config
@@ -211,9 +222,9 @@ pub fn run(args: RunArgs) -> Result<()> {
         PathBuf::from("out").join(stem)
     });
     if let Some(n) = args.worlds {
-        return run_worlds(&args, &config, &out, n, started);
+        return run_worlds(args, registry, &config, &out, n, started);
     }
-    let summary = run_once(&args, &config, &out, true, started)?;
+    let summary = run_once(args, registry, &config, &out, true, started)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else if !args.quiet {
@@ -227,6 +238,7 @@ pub fn run(args: RunArgs) -> Result<()> {
 /// `pictures`) and `summary.json`, which it returns.
 fn run_once(
     args: &RunArgs,
+    registry: &Registry,
     config: &ExperimentConfig,
     out: &Path,
     pictures: bool,
@@ -235,7 +247,7 @@ fn run_once(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_atomic(
         &out.join("config.toml"),
-        config.effective_toml()?.as_bytes(),
+        config.effective_toml(registry)?.as_bytes(),
     )?;
 
     let t = Instant::now();
@@ -258,7 +270,7 @@ fn run_once(
         .jobs
         .or_else(|| std::thread::available_parallelism().ok())
         .map_or(1, std::num::NonZeroUsize::get);
-    let outcomes = run_matchers(config, &source, out, jobs, !args.quiet, pictures)?;
+    let outcomes = run_matchers(config, registry, &source, out, jobs, !args.quiet, pictures)?;
     let matching_seconds = t.elapsed().as_secs_f64();
 
     let t = Instant::now();

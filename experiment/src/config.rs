@@ -1,6 +1,8 @@
 //! The experiment file: its source, the matchers to run and their overrides.
 
 use super::*;
+use qicp_io::carmen::RecordOrder;
+use qicp_matchers::Registry;
 
 /// An experiment configuration that cannot be used: the one configuration error of every
 /// qicp file, a per-kind matcher table's error nested under `matchers.<kind>`.
@@ -8,6 +10,26 @@ pub type ExperimentError = qicp_core::ConfigError;
 
 pub(super) fn invalid(key: &str, why: impl Into<String>) -> ExperimentError {
     ExperimentError::invalid(key, why)
+}
+
+fn is_file_order(order: &RecordOrder) -> bool {
+    *order == RecordOrder::File
+}
+
+/// A [`RecordOrder`] in TOML by its name ([`RecordOrder::name`]: `"file"`, `"time"`).
+mod order_name {
+    use qicp_io::carmen::RecordOrder;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(super) fn serialize<S: Serializer>(order: &RecordOrder, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(order.name())
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<RecordOrder, D::Error> {
+        String::deserialize(d)?
+            .parse()
+            .map_err(serde::de::Error::custom)
+    }
 }
 
 /// `[source]`: where the records come from. Exactly one of `sim` and `log`.
@@ -56,8 +78,8 @@ pub struct SourceConfig {
     pub lenient: bool,
     /// The order of a CARMEN log's records: `"file"` (the order the laser took them) or
     /// `"time"` (sorted by timestamp, as `qicp convert` writes a bag). Default `"file"`.
-    #[serde(default, skip_serializing_if = "crate::match_cmd::LogOrder::is_file")]
-    pub order: crate::match_cmd::LogOrder,
+    #[serde(default, with = "order_name", skip_serializing_if = "is_file_order")]
+    pub order: RecordOrder,
 }
 
 impl SourceConfig {
@@ -66,7 +88,7 @@ impl SourceConfig {
         self.groundtruth
             .as_ref()
             .map(|p| {
-                crate::eval::load_trajectory(p, crate::eval::LogPoses::Truth)
+                qicp_eval::load_trajectory(p, qicp_eval::LogPoses::Truth)
                     .with_context(|| format!("reading ground truth {}", p.display()))
             })
             .transpose()
@@ -74,17 +96,17 @@ impl SourceConfig {
 
     /// How to read the log: CARMEN with `lenient`, a bag with the topics and frames given.
     #[must_use]
-    pub fn log_options(&self) -> crate::logs::LogOptions {
-        use crate::logs::rosbag::{BagOptions, OdometrySource};
+    pub fn log_options(&self) -> qicp_io::LogOptions {
+        use qicp_io::rosbag::{BagOptions, OdometrySource};
         let odometry = OdometrySource::from_names(
             self.odom_topic.as_deref().unwrap_or("/odom"),
             self.odom_frame.as_deref(),
             self.base_frame.as_deref().unwrap_or("base_link"),
         );
-        crate::logs::LogOptions {
+        qicp_io::LogOptions {
             carmen: CarmenOptions {
                 lenient: self.lenient,
-                order: self.order.into(),
+                order: self.order,
                 ..CarmenOptions::default()
             },
             bag: BagOptions::new(
@@ -149,21 +171,21 @@ pub struct ExperimentConfig {
 }
 
 impl ExperimentConfig {
-    /// Parses a TOML document and validates it. Relative paths stay as written; see
+    /// Parses a TOML document and validates it against the matchers of `registry`. Relative paths stay as written; see
     /// [`ExperimentConfig::resolve`].
-    pub fn from_toml(text: &str) -> Result<Self, ExperimentError> {
+    pub fn from_toml(text: &str, registry: &Registry) -> Result<Self, ExperimentError> {
         let c: Self = toml::from_str(text).map_err(|e| ExperimentError::Parse(e.to_string()))?;
-        c.validate()?;
+        c.validate(registry)?;
         Ok(c)
     }
 
     /// Reads, validates and resolves a file: relative paths become relative to its directory.
-    pub fn load(path: &Path) -> Result<Self, ExperimentError> {
+    pub fn load(path: &Path, registry: &Registry) -> Result<Self, ExperimentError> {
         let text = std::fs::read_to_string(path).map_err(|e| ExperimentError::Io {
             path: path.display().to_string(),
             source: e,
         })?;
-        let mut c = Self::from_toml(&text).map_err(|e| match e {
+        let mut c = Self::from_toml(&text, registry).map_err(|e| match e {
             ExperimentError::Parse(m) => ExperimentError::Parse(format!("{}: {m}", path.display())),
             other => other,
         })?;
@@ -186,8 +208,9 @@ impl ExperimentConfig {
         }
     }
 
-    /// Checks the source, the matcher list and every per-kind table; names the bad key.
-    pub fn validate(&self) -> Result<(), ExperimentError> {
+    /// Checks the source, the matcher list and every per-kind table against the matchers of
+    /// `registry`; names the bad key.
+    pub fn validate(&self, registry: &Registry) -> Result<(), ExperimentError> {
         let s = &self.source;
         match (&s.sim, &s.log) {
             (None, None) => {
@@ -248,7 +271,6 @@ impl ExperimentConfig {
             ));
         }
         let mut seen = std::collections::BTreeSet::new();
-        let registry = crate::registry();
         for k in &self.run.matchers {
             if !seen.insert(k) {
                 return Err(invalid("run.matchers", format!("`{k}` is listed twice")));
@@ -280,17 +302,21 @@ impl ExperimentConfig {
                     "parameters for a kind that `run.matchers` does not list",
                 ));
             }
-            self.matcher(kind)?;
+            self.matcher(kind, registry)?;
         }
         Ok(())
     }
 
     /// The effective configuration of `kind`: its registry defaults, overridden by its
     /// `[matchers.<kind>]` table.
-    pub fn matcher(&self, kind: &str) -> Result<MatcherConfig, ExperimentError> {
+    pub fn matcher(
+        &self,
+        kind: &str,
+        registry: &Registry,
+    ) -> Result<MatcherConfig, ExperimentError> {
         let err = |e: ExperimentError| e.inside(format!("matchers.{kind}"));
         let Some(table) = self.matchers.get(kind) else {
-            return crate::registry().config(kind).map_err(err);
+            return registry.config(kind).map_err(err);
         };
         if table.contains_key("kind") {
             return Err(err(ExperimentError::invalid(
@@ -303,16 +329,16 @@ impl ExperimentConfig {
         let mut doc = toml::Table::new();
         doc.insert("matcher".into(), toml::Value::Table(matcher));
         let text = toml::to_string(&doc).map_err(|e| ExperimentError::Parse(e.to_string()))?;
-        crate::registry().parse(&text).map_err(err)
+        registry.parse(&text).map_err(err)
     }
 
     /// The effective configuration as TOML: the source and run as loaded (paths resolved) and
     /// every matcher's parameters spelled out under `[matchers.<kind>]`. It loads back as an
     /// experiment that runs the same.
-    pub fn effective_toml(&self) -> Result<String, ExperimentError> {
+    pub fn effective_toml(&self, registry: &Registry) -> Result<String, ExperimentError> {
         let mut c = self.clone();
         for kind in &self.run.matchers {
-            let m = self.matcher(kind)?;
+            let m = self.matcher(kind, registry)?;
             let mut value = m
                 .to_table()
                 .map_err(|e| e.inside(format!("matchers.{kind}")))?;

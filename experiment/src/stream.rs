@@ -7,9 +7,9 @@
 //! for the ATE. The pictures read the trajectories back from their files.
 
 use super::*;
-use crate::eval::{RelationProbe, origin_alignment};
-use crate::logs::tum::write_tum_pose;
-use crate::matching::{MatchLoop, RunWriter, progress_bar};
+use qicp_eval::{RelationProbe, origin_alignment};
+use qicp_io::tum::write_tum_pose;
+use qicp_runner::matching::{MatchLoop, RunWriter, progress_bar};
 
 /// One trajectory as it streams past: the poses a relation may need and, when there is truth
 /// to score it against, every pose.
@@ -23,7 +23,7 @@ impl Track {
         let probe = source
             .relations
             .as_deref()
-            .map(|r| RelationProbe::new(r, crate::eval::DEFAULT_MAX_DT))
+            .map(|r| RelationProbe::new(r, qicp_eval::DEFAULT_MAX_DT))
             .transpose()?;
         Ok(Self {
             probe,
@@ -52,7 +52,7 @@ impl Track {
 /// The file is written under a temporary name beside `path` and renamed when complete, so a
 /// pass that fails leaves no partial file.
 pub(super) fn odometry_pass(source: &Source, path: &Path) -> Result<Scores> {
-    let mut w = crate::matching::OutputFile::create(path)?;
+    let mut w = qicp_runner::matching::OutputFile::create(path)?;
     let mut track = Track::new(source)?;
     source.each_record(|r| {
         write_tum_pose(&mut w, r.timestamp(), &r.odometry)

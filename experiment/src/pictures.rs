@@ -4,7 +4,7 @@ use super::*;
 
 /// Writes `traj` to `path` (TUM) under a temporary name, renamed into place when complete.
 pub(super) fn write_trajectory(path: &Path, traj: &[Stamped]) -> Result<()> {
-    let mut w = crate::matching::OutputFile::create(path)?;
+    let mut w = qicp_runner::matching::OutputFile::create(path)?;
     write_tum(&mut w, traj).with_context(|| format!("writing {}", path.display()))?;
     w.commit()
 }
@@ -13,7 +13,7 @@ pub(super) fn write_trajectory(path: &Path, traj: &[Stamped]) -> Result<()> {
 /// [`evaluate_ate`]); unchanged without truth.
 pub(super) fn aligned(traj: &[Stamped], truth: Option<&[Stamped]>) -> Vec<Pose2> {
     let to_truth = match (traj.first(), truth.and_then(<[Stamped]>::first)) {
-        (Some((_, e)), Some((_, t))) => crate::eval::origin_alignment(e, t),
+        (Some((_, e)), Some((_, t))) => qicp_eval::origin_alignment(e, t),
         _ => Pose2::IDENTITY,
     };
     traj.iter().map(|(_, p)| to_truth * *p).collect()
@@ -24,7 +24,7 @@ fn trajectory_of(o: &MatcherOutcome) -> Result<std::borrow::Cow<'_, [Stamped]>> 
     Ok(match &o.trajectory {
         Some(t) => std::borrow::Cow::Borrowed(t.as_slice()),
         None => std::borrow::Cow::Owned(
-            crate::logs::tum::read_tum(&o.trajectory_file)
+            qicp_io::tum::read_tum(&o.trajectory_file)
                 .with_context(|| format!("reading {}", o.trajectory_file.display()))?,
         ),
     })
@@ -33,7 +33,7 @@ fn trajectory_of(o: &MatcherOutcome) -> Result<std::borrow::Cow<'_, [Stamped]>> 
 /// Draws a picture at `path` through `draw`, which is given the temporary file to draw into:
 /// renamed into place when complete, removed if drawing fails or a signal stops the run.
 fn picture<T>(path: &Path, draw: impl FnOnce(&Path) -> Result<T>) -> Result<T> {
-    let out = crate::matching::OutputFile::create(path)?;
+    let out = qicp_runner::matching::OutputFile::create(path)?;
     let value = draw(out.temp_path()).with_context(|| format!("drawing {}", path.display()))?;
     out.commit()?;
     Ok(value)
@@ -188,7 +188,7 @@ pub(super) fn draw_pictures(
         Some(odometry) => aligned(&odometry, truth),
         None => {
             let path = out.join("odometry.tum");
-            let odometry = crate::logs::tum::read_tum(&path)
+            let odometry = qicp_io::tum::read_tum(&path)
                 .with_context(|| format!("reading {}", path.display()))?;
             aligned(&odometry, truth)
         }
