@@ -63,7 +63,6 @@ use qicp_matchers::{MatcherConfig, Registry};
 use qicp_plots::{self as plots, Panel, PathSeries, ScanSeries};
 use qicp_runner::matching::{MatchSummary, ScanRow, run_matcher, write_atomic, write_run};
 use serde::{Deserialize, Serialize};
-use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -72,11 +71,13 @@ mod config;
 mod pictures;
 mod source;
 mod stream;
+mod summary;
 mod worlds;
 
 pub use config::*;
 use pictures::{draw_pictures, write_trajectory};
 pub use source::*;
+pub use summary::*;
 use worlds::run_worlds;
 
 /// The matchers an experiment runs when `[run] matchers` is not given.
@@ -243,7 +244,7 @@ fn run_once(
     out: &Path,
     pictures: bool,
     started: Instant,
-) -> Result<Value> {
+) -> Result<ExperimentSummary> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_atomic(
         &out.join("config.toml"),
@@ -277,30 +278,24 @@ fn run_once(
     let pictures = if pictures {
         draw_pictures(out, &source, &outcomes)?
     } else {
-        json!({})
+        BTreeMap::new()
     };
     let plot_seconds = t.elapsed().as_secs_f64();
 
-    let mut matchers = Map::new();
-    for o in &outcomes {
-        matchers.insert(o.kind(), o.to_json()?);
-    }
-    let mut odo = Map::new();
-    odometry_scores.insert_into(&mut odo)?;
-    let summary = json!({
-        "source": source.name,
-        "config": args.config.display().to_string(),
-        "scans": source.scans(),
-        "ground_truth": source.truth.is_some(),
-        "matchers": matchers,
-        "odometry": odo,
-        "ratios": ratios(&outcomes),
-        "pictures": pictures,
-        "source_seconds": source_seconds,
-        "matching_seconds": matching_seconds,
-        "plot_seconds": plot_seconds,
-        "wall_seconds": started.elapsed().as_secs_f64(),
-    });
+    let summary = ExperimentSummary {
+        source: source.name.clone(),
+        config: args.config.display().to_string(),
+        scans: source.scans(),
+        ground_truth: source.truth.is_some(),
+        matchers: outcomes.iter().map(|o| (o.kind(), o.figures())).collect(),
+        odometry: odometry_scores.figures(),
+        ratios: ratios(&outcomes),
+        pictures,
+        source_seconds,
+        matching_seconds,
+        plot_seconds,
+        wall_seconds: started.elapsed().as_secs_f64(),
+    };
     let text = serde_json::to_string_pretty(&summary)?;
     write_atomic(&out.join("summary.json"), format!("{text}\n").as_bytes())?;
     Ok(summary)
@@ -324,15 +319,18 @@ fn table_line(cells: &[String], widths: &[usize]) -> String {
 }
 
 /// The table printed after a run.
-fn table(summary: &Value, kinds: &[String]) -> String {
-    let f = |v: &Value, scale: f64, digits: usize| {
-        v.as_f64()
+fn table(summary: &ExperimentSummary, kinds: &[String]) -> String {
+    let f = |v: Option<f64>, scale: f64, digits: usize| {
+        v.filter(|x| x.is_finite())
             .map_or_else(|| "-".to_string(), |x| format!("{:.digits$}", x * scale))
     };
-    let truth = summary["ground_truth"].as_bool().unwrap_or(false);
-    let relations = kinds
-        .first()
-        .is_some_and(|k| summary["matchers"][k.as_str()].get("relations").is_some());
+    let truth = summary.ground_truth;
+    let relations = kinds.first().is_some_and(|k| {
+        summary
+            .matchers
+            .get(k)
+            .is_some_and(|m| m.scores.relations.is_some())
+    });
     let mut head = vec!["matcher"];
     if truth {
         head.extend(["ATE m", "RPE %", "final m"]);
@@ -350,33 +348,37 @@ fn table(summary: &Value, kinds: &[String]) -> String {
         "fallbacks",
     ]);
     let mut rows: Vec<Vec<String>> = Vec::new();
-    let mut row_of = |name: &str, m: &Value, matched: bool| {
+    let mut row_of = |name: &str, scores: &Scored, matched: Option<&MatcherFigures>| {
         let mut r = vec![name.to_string()];
+        let t = scores.truth.as_ref();
         if truth {
-            r.push(f(&m["ate_rmse_m"], 1.0, 3));
-            r.push(f(&m["rpe_trans_per_m"], 100.0, 2));
-            r.push(f(&m["final_error_m"], 1.0, 3));
+            r.push(f(t.map(|t| t.ate_rmse_m), 1.0, 3));
+            r.push(f(t.map(|t| t.rpe_trans_per_m), 100.0, 2));
+            r.push(f(t.map(|t| t.final_error_m), 1.0, 3));
         }
         if relations {
-            r.push(f(&m["relations"]["trans_mean"], 1.0, 3));
-            r.push(f(&m["relations"]["rot_mean_deg"], 1.0, 2));
+            let rel = scores.relations.as_ref();
+            r.push(f(rel.map(|r| r.trans_mean), 1.0, 3));
+            r.push(f(rel.map(|r| r.rot_mean_deg), 1.0, 2));
         }
-        if matched {
-            r.push(f(&m["residual_mean_mm"], 1.0, 2));
-            r.push(f(&m["certainty_mean"], 1e6, 2));
-            r.push(f(&m["sigma_mean_mm"], 1.0, 2));
-            r.push(f(&m["ms_per_scan_median"], 1.0, 2));
-            r.push(f(&m["ms_per_scan_p99"], 1.0, 2));
-            r.push(m["map_points"].to_string());
-            r.push(m["fallbacks"].to_string());
+        if let Some(m) = matched {
+            r.push(f(Some(m.residual_mean_mm), 1.0, 2));
+            r.push(f(Some(m.certainty_mean), 1e6, 2));
+            r.push(f(Some(m.sigma_mean_mm), 1.0, 2));
+            r.push(f(Some(m.ms_per_scan_median), 1.0, 2));
+            r.push(f(Some(m.ms_per_scan_p99), 1.0, 2));
+            r.push(m.map_points.to_string());
+            r.push(m.fallbacks.to_string());
         } else {
             r.extend(std::iter::repeat_n("-".to_string(), 7));
         }
         rows.push(r);
     };
-    row_of("odometry", &summary["odometry"], false);
+    row_of("odometry", &summary.odometry, None);
     for k in kinds {
-        row_of(k, &summary["matchers"][k.as_str()], true);
+        if let Some(m) = summary.matchers.get(k) {
+            row_of(k, &m.scores, Some(m));
+        }
     }
     let widths: Vec<usize> = (0..head.len())
         .map(|c| {
@@ -388,34 +390,29 @@ fn table(summary: &Value, kinds: &[String]) -> String {
         })
         .collect();
     let line = |cells: Vec<String>| table_line(&cells, &widths);
-    let mut text = format!(
-        "{} — {} scans\n",
-        summary["source"].as_str().unwrap_or("?"),
-        summary["scans"]
-    );
+    let mut text = format!("{} — {} scans\n", summary.source, summary.scans);
     text += &line(head.iter().map(|s| (*s).to_string()).collect());
     text.push('\n');
     for r in rows {
         text += &line(r);
         text.push('\n');
     }
-    if let Some(ratios) = summary["ratios"].as_object().filter(|r| !r.is_empty()) {
+    if !summary.ratios.is_empty() {
         text += "\nboosted / incremental:";
-        for (pair, r) in ratios {
+        for (pair, r) in &summary.ratios {
             let parts: Vec<String> = [
-                "ate",
-                "residual",
-                "certainty",
-                "certainty_per_scan_median",
-                "sigma",
-                "relations_trans",
+                ("ate", r.ate),
+                ("residual", Some(r.residual)),
+                ("certainty", Some(r.certainty)),
+                (
+                    "certainty_per_scan_median",
+                    Some(r.certainty_per_scan_median),
+                ),
+                ("sigma", Some(r.sigma)),
+                ("relations_trans", r.relations_trans),
             ]
             .iter()
-            .filter_map(|k| {
-                r.get(*k)
-                    .and_then(Value::as_f64)
-                    .map(|v| format!("{k} {v:.3}"))
-            })
+            .filter_map(|(k, v)| v.filter(|v| v.is_finite()).map(|v| format!("{k} {v:.3}")))
             .collect();
             text += &format!("\n  {pair}: {}", parts.join(", "));
         }
@@ -423,10 +420,10 @@ fn table(summary: &Value, kinds: &[String]) -> String {
     }
     text += &format!(
         "\nwall time {:.2} s (source {:.2} s, matching {:.2} s, pictures {:.2} s)",
-        summary["wall_seconds"].as_f64().unwrap_or(f64::NAN),
-        summary["source_seconds"].as_f64().unwrap_or(f64::NAN),
-        summary["matching_seconds"].as_f64().unwrap_or(f64::NAN),
-        summary["plot_seconds"].as_f64().unwrap_or(f64::NAN),
+        summary.wall_seconds,
+        summary.source_seconds,
+        summary.matching_seconds,
+        summary.plot_seconds,
     );
     text
 }

@@ -137,7 +137,7 @@ fn joined(
         .collect()
 }
 
-/// Draws every picture; returns `{file: what it shows}`. A simulated drive's records are held
+/// Draws every picture; returns what each file shows, by file name. A simulated drive's records are held
 /// and drawn from memory; a log is read afresh for each matcher's map, and the paths are read
 /// back from `odometry.tum` and each `trajectory.tum` (a picture of paths holds them while it
 /// is drawn, 24 bytes a scan each).
@@ -145,8 +145,8 @@ pub(super) fn draw_pictures(
     out: &Path,
     source: &Source,
     outcomes: &[MatcherOutcome],
-) -> Result<Value> {
-    let mut pictures = Map::new();
+) -> Result<BTreeMap<String, String>> {
+    let mut pictures = BTreeMap::new();
     let truth = source.truth.as_deref();
     let truth_poses: Option<Vec<Pose2>> = truth.map(|t| t.iter().map(|p| p.1).collect());
     let aligned_note = if truth.is_some() {
@@ -175,7 +175,7 @@ pub(super) fn draw_pictures(
         r?;
         pictures.insert(
             file,
-            json!("occupancy grid of every scan at the matcher's poses: black hit, white free, grey unseen; blue estimated path, grey true path (paper Figs. 3, 5)"),
+            "occupancy grid of every scan at the matcher's poses: black hit, white free, grey unseen; blue estimated path, grey true path (paper Figs. 3, 5)".to_string(),
         );
     }
 
@@ -226,7 +226,8 @@ pub(super) fn draw_pictures(
     })?;
     pictures.insert(
         "trajectories.png".into(),
-        json!("every matcher's path with the ground truth (black) and raw odometry (grey), metres"),
+        "every matcher's path with the ground truth (black) and raw odometry (grey), metres"
+            .to_string(),
     );
 
     // Paper Fig. 4: per family, the boosted matcher in front of the incremental one.
@@ -279,7 +280,7 @@ pub(super) fn draw_pictures(
                 &residual,
             )?)
         })?;
-        pictures.insert("residual.png".into(), json!("residual correlation distance per scan (mm), boosted in front of incremental, thick lines the means (paper Fig. 4a-b)"));
+        pictures.insert("residual.png".into(), "residual correlation distance per scan (mm), boosted in front of incremental, thick lines the means (paper Fig. 4a-b)".to_string());
         let certainty: Vec<Panel> = pairs
             .iter()
             .map(|(i, b)| Panel {
@@ -306,7 +307,7 @@ pub(super) fn draw_pictures(
                 &certainty,
             )?)
         })?;
-        pictures.insert("certainty.png".into(), json!("per scan, the boosted matcher's certainty sqrt(σxx²+σyy²) (covariance diagonal, m²) divided by the incremental one's; dashed: 1, thick: the mean (paper Fig. 4c-d)"));
+        pictures.insert("certainty.png".into(), "per scan, the boosted matcher's certainty sqrt(σxx²+σyy²) (covariance diagonal, m²) divided by the incremental one's; dashed: 1, thick: the mean (paper Fig. 4c-d)".to_string());
     }
-    Ok(Value::Object(pictures))
+    Ok(pictures)
 }

@@ -244,17 +244,13 @@ impl Scores {
         Ok(Self { ate, relations })
     }
 
-    pub(super) fn insert_into(&self, m: &mut Map<String, Value>) -> Result<()> {
-        if let Some(a) = &self.ate {
-            m.insert("ate_rmse_m".into(), json!(a.ate_rmse_m));
-            m.insert("rpe_trans_per_m".into(), json!(a.rpe_trans_per_m));
-            m.insert("rpe_rot_deg_per_m".into(), json!(a.rpe_rot_deg_per_m));
-            m.insert("final_error_m".into(), json!(a.final_error_m));
+    /// The figures `summary.json` gives of these scores.
+    #[must_use]
+    pub fn figures(&self) -> Scored {
+        Scored {
+            truth: self.ate.as_ref().map(TruthFigures::from),
+            relations: self.relations.clone(),
         }
-        if let Some(r) = &self.relations {
-            m.insert("relations".into(), serde_json::to_value(r)?);
-        }
-        Ok(())
     }
 }
 
@@ -318,29 +314,10 @@ impl MatcherOutcome {
         self.config.kind()
     }
 
-    pub(super) fn to_json(&self) -> Result<Value> {
-        let s = &self.summary;
-        let mut m = Map::new();
-        self.scores.insert_into(&mut m)?;
-        for (k, v) in [
-            ("residual_mean_mm", json!(s.residual_mean_mm)),
-            ("certainty_mean", json!(s.certainty_mean)),
-            ("sigma_mean_mm", json!(s.sigma_mean_mm)),
-            ("ms_per_scan_median", json!(s.ms_per_scan_median)),
-            ("ms_per_scan_p99", json!(s.ms_per_scan_p99)),
-            ("map_points", json!(s.map_points)),
-            ("fallbacks", json!(s.fallbacks)),
-            ("fallback_reasons", json!(s.fallback_reasons)),
-            ("inserted", json!(s.inserted)),
-            ("searched", json!(s.searched)),
-            ("recovered", json!(s.recovered)),
-            ("refused", json!(s.refused)),
-            ("withheld", json!(s.withheld)),
-            ("matching_seconds", json!(s.wall_seconds)),
-        ] {
-            m.insert(k.into(), v);
-        }
-        Ok(Value::Object(m))
+    /// The figures `summary.json` gives of this matcher.
+    #[must_use]
+    pub fn figures(&self) -> MatcherFigures {
+        MatcherFigures::new(self.scores.figures(), &self.summary)
     }
 }
 
@@ -353,10 +330,10 @@ pub fn incremental_of(config: &MatcherConfig) -> Option<String> {
         .then(|| config.algorithm().to_string())
 }
 
-/// Boosted / incremental ratios of every boosted kind whose twin also ran:
-/// `{"q-wsm/wsm": {"ate": …, "residual": …, "certainty": …, "sigma": …, "relations_trans": …}}`.
-pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> Value {
-    let mut out = Map::new();
+/// Boosted / incremental ratios of every boosted kind whose twin also ran, by
+/// `"<boosted>/<incremental>"`.
+pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> BTreeMap<String, Ratios> {
+    let mut out = BTreeMap::new();
     for b in outcomes {
         let Some(inc) = incremental_of(&b.config) else {
             continue;
@@ -364,33 +341,8 @@ pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> Value {
         let Some(i) = outcomes.iter().find(|o| o.kind() == inc) else {
             continue;
         };
-        let ratio = |x: f64, y: f64| json!(x / y);
-        let mut m = Map::new();
-        if let (Some(ab), Some(ai)) = (&b.scores.ate, &i.scores.ate) {
-            m.insert("ate".into(), ratio(ab.ate_rmse_m, ai.ate_rmse_m));
-            m.insert(
-                "final_error".into(),
-                ratio(ab.final_error_m, ai.final_error_m),
-            );
-        }
-        if let (Some(rb), Some(ri)) = (&b.scores.relations, &i.scores.relations) {
-            m.insert(
-                "relations_trans".into(),
-                ratio(rb.trans_mean, ri.trans_mean),
-            );
-        }
-        m.insert(
-            "residual".into(),
-            ratio(b.summary.residual_mean_mm, i.summary.residual_mean_mm),
-        );
-        m.insert(
-            "certainty".into(),
-            ratio(b.summary.certainty_mean, i.summary.certainty_mean),
-        );
-        m.insert(
-            "sigma".into(),
-            ratio(b.summary.sigma_mean_mm, i.summary.sigma_mean_mm),
-        );
+        let truth = b.scores.ate.as_ref().zip(i.scores.ate.as_ref());
+        let relations = b.scores.relations.as_ref().zip(i.scores.relations.as_ref());
         // Per scan (paper Fig. 4c-d): the mean is at the mercy of a few near-degenerate
         // incremental matches, the median is not.
         let per_scan: Vec<f64> = b
@@ -401,15 +353,20 @@ pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> Value {
             .map(|(cb, ci)| cb / ci)
             .filter(|r| r.is_finite())
             .collect();
-        let mean = per_scan.iter().sum::<f64>() / per_scan.len() as f64;
-        m.insert("certainty_per_scan_mean".into(), json!(mean));
-        m.insert(
-            "certainty_per_scan_median".into(),
-            json!(qicp_runner::matching::quantile(&per_scan, 0.5)),
-        );
-        out.insert(format!("{}/{}", b.kind(), inc), Value::Object(m));
+        let (sb, si) = (&b.summary, &i.summary);
+        let r = Ratios {
+            ate: truth.map(|(ab, ai)| ab.ate_rmse_m / ai.ate_rmse_m),
+            final_error: truth.map(|(ab, ai)| ab.final_error_m / ai.final_error_m),
+            relations_trans: relations.map(|(rb, ri)| rb.trans_mean / ri.trans_mean),
+            residual: sb.residual_mean_mm / si.residual_mean_mm,
+            certainty: sb.certainty_mean / si.certainty_mean,
+            sigma: sb.sigma_mean_mm / si.sigma_mean_mm,
+            certainty_per_scan_mean: per_scan.iter().sum::<f64>() / per_scan.len() as f64,
+            certainty_per_scan_median: qicp_runner::matching::quantile(&per_scan, 0.5),
+        };
+        out.insert(format!("{}/{}", b.kind(), inc), r);
     }
-    Value::Object(out)
+    out
 }
 
 #[cfg(test)]
