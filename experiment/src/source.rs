@@ -249,7 +249,7 @@ impl Scores {
     pub fn figures(&self) -> Scored {
         Scored {
             truth: self.ate.as_ref().map(TruthFigures::from),
-            relations: self.relations.clone(),
+            relations: self.relations,
         }
     }
 }
