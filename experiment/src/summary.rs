@@ -211,7 +211,7 @@ pub struct WorldsReport {
 }
 
 /// A figure that a matcher's figures give, NaN where they do not.
-type Figure<T> = (&'static str, fn(&T) -> f64);
+pub type Figure<T> = (&'static str, fn(&T) -> f64);
 
 fn truth(m: &MatcherFigures, get: fn(&TruthFigures) -> f64) -> f64 {
     m.scores.truth.as_ref().map_or(f64::NAN, get)

@@ -2,6 +2,31 @@
 
 use super::*;
 
+/// Per key (a matcher kind, a boosted / incremental pair) and per figure, the spread of the
+/// figure over the worlds' summaries; NaN for a world where `pick` finds nothing.
+fn spreads<T>(
+    summaries: &[ExperimentSummary],
+    keys: &[String],
+    figures: &[Figure<T>],
+    pick: impl for<'a> Fn(&'a ExperimentSummary, &String) -> Option<&'a T>,
+) -> BTreeMap<String, BTreeMap<&'static str, Spread>> {
+    keys.iter()
+        .map(|key| {
+            let per_figure = figures
+                .iter()
+                .map(|&(name, get)| {
+                    let values: Vec<f64> = summaries
+                        .iter()
+                        .map(|s| pick(s, key).map_or(f64::NAN, get))
+                        .collect();
+                    (name, Spread::of(&values))
+                })
+                .collect();
+            (key.clone(), per_figure)
+        })
+        .collect()
+}
+
 /// `qicp run --worlds N`: the experiment on N layouts of the simulated world.
 pub(super) fn run_worlds(
     args: &RunArgs,
@@ -36,44 +61,17 @@ pub(super) fn run_worlds(
                 .with_context(|| format!("world seed {seed}"))?,
         );
     }
-    let spread = |get: &dyn Fn(&ExperimentSummary) -> f64| -> Spread {
-        Spread::of(&summaries.iter().map(get).collect::<Vec<_>>())
-    };
-    let matchers = config
-        .run
-        .matchers
-        .iter()
-        .map(|kind| {
-            let figures = WORLD_FIGURES
-                .iter()
-                .map(|&(name, get)| {
-                    let of = |s: &ExperimentSummary| s.matchers.get(kind).map_or(f64::NAN, get);
-                    (name, spread(&of))
-                })
-                .collect();
-            (kind.clone(), figures)
-        })
-        .collect();
-    let ratios = summaries[0]
-        .ratios
-        .keys()
-        .map(|pair| {
-            let figures = WORLD_RATIOS
-                .iter()
-                .map(|&(name, get)| {
-                    let of = |s: &ExperimentSummary| s.ratios.get(pair).map_or(f64::NAN, get);
-                    (name, spread(&of))
-                })
-                .collect();
-            (pair.clone(), figures)
-        })
-        .collect();
+    let matchers = spreads(&summaries, &config.run.matchers, &WORLD_FIGURES, |s, k| {
+        s.matchers.get(k)
+    });
+    let pairs: Vec<String> = summaries[0].ratios.keys().cloned().collect();
+    let ratios = spreads(&summaries, &pairs, &WORLD_RATIOS, |s, k| s.ratios.get(k));
     let report = WorldsReport {
         source: summaries[0].source.clone(),
         config: args.config.display().to_string(),
         world_seeds: seeds,
         noise_seeds: (0..n as u64).map(|k| first_noise + k).collect(),
-        scans: spread(&|s| s.scans as f64),
+        scans: Spread::of(&summaries.iter().map(|s| s.scans as f64).collect::<Vec<_>>()),
         matchers,
         ratios,
         wall_seconds: started.elapsed().as_secs_f64(),
