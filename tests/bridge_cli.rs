@@ -4,7 +4,9 @@
 
 mod bridge_procs;
 
-use bridge_procs::{PARK, Proc, T, bridge_u64, prefix, publisher_report, summary, tempdir};
+use bridge_procs::{
+    PARK, Proc, T, bridge_u64, prefix, publisher_report, simulator, summary, tempdir,
+};
 use qicp::matching::{Matching, write_run};
 use qicp_matchers::{MatcherConfig, MatcherKind};
 use std::path::Path;
@@ -112,21 +114,11 @@ fn late_subscriber_gets_the_history_it_asked_for() {
     let dir = tempdir("late");
     let p = prefix("late");
     // 40 scans at 10x the park's 1 Hz: 4 s; the subscriber joins after ~1.5 s.
-    let publ = Proc::spawn(
+    let publ = simulator(
         "publisher",
-        &[
-            "sim",
-            PARK,
-            "--publish",
-            "--max-scans",
-            "40",
-            "--rate",
-            "10x",
-            "--wait-subscribers",
-            "0",
-            "--service-prefix",
-            &p,
-        ],
+        &p,
+        40,
+        &["--rate", "10x", "--wait-subscribers", "0"],
     );
     std::thread::sleep(Duration::from_millis(1500));
     let out = dir.join("sub");
@@ -179,20 +171,7 @@ fn killed_publisher_is_reported_and_the_subscriber_exits() {
             &out.to_string_lossy(),
         ],
     );
-    let mut publ = Proc::spawn(
-        "publisher",
-        &[
-            "sim",
-            PARK,
-            "--publish",
-            "--max-scans",
-            "200",
-            "--rate",
-            "20x",
-            "--service-prefix",
-            &p,
-        ],
-    );
+    let mut publ = simulator("publisher", &p, 200, &["--rate", "20x"]);
     std::thread::sleep(Duration::from_millis(1500));
     publ.kill(); // SIGKILL: no end marker, no goodbye
     let started = Instant::now();
@@ -232,35 +211,11 @@ fn restarted_publisher_is_picked_up() {
             &out.to_string_lossy(),
         ],
     );
-    let mut first = Proc::spawn(
-        "publisher 1",
-        &[
-            "sim",
-            PARK,
-            "--publish",
-            "--max-scans",
-            "200",
-            "--rate",
-            "20x",
-            "--service-prefix",
-            &p,
-        ],
-    );
+    let mut first = simulator("publisher 1", &p, 200, &["--rate", "20x"]);
     std::thread::sleep(Duration::from_millis(1200));
     first.kill();
     std::thread::sleep(Duration::from_millis(500));
-    let second = Proc::spawn(
-        "publisher 2",
-        &[
-            "sim",
-            PARK,
-            "--publish",
-            "--max-scans",
-            "25",
-            "--service-prefix",
-            &p,
-        ],
-    );
+    let second = simulator("publisher 2", &p, 25, &[]);
     let (ps, _, perr) = second.wait(T);
     assert!(ps.success(), "second publisher: {perr}");
     let (ss, _, serr) = sub.wait(T);

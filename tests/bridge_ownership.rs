@@ -4,43 +4,12 @@
 
 mod bridge_procs;
 
-use bridge_procs::{PARK, Proc, QICP, T, bridge_u64, prefix, publisher_report, summary, tempdir};
+use bridge_procs::{
+    PARK, Proc, QICP, T, bridge_u64, matcher, prefix, publisher_report, simulator, summary, tempdir,
+};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// `qicp match --subscribe --matcher idc` on prefix `p`, writing to `out`.
-fn matcher(p: &str, out: &Path, extra: &[&str]) -> Proc {
-    let out = out.to_string_lossy().to_string();
-    let mut args = vec![
-        "match",
-        "--subscribe",
-        "--matcher",
-        "idc",
-        "--service-prefix",
-        p,
-        "--out",
-        &out,
-    ];
-    args.extend_from_slice(extra);
-    Proc::spawn("subscriber", &args)
-}
-
-/// `qicp sim PARK --publish --max-scans n` on prefix `p`.
-fn simulator(name: &'static str, p: &str, scans: usize, extra: &[&str]) -> Proc {
-    let n = scans.to_string();
-    let mut args = vec![
-        "sim",
-        PARK,
-        "--publish",
-        "--max-scans",
-        &n,
-        "--service-prefix",
-        p,
-    ];
-    args.extend_from_slice(extra);
-    Proc::spawn(name, &args)
-}
 
 /// Issue 14: a second publisher on the same prefix mixed its scans into the stream (680 of
 /// 784 poses from the intruder) and its end marker ended the subscriber's run.

@@ -94,3 +94,36 @@ pub fn publisher_report(out: &str) -> serde_json::Value {
 
 /// How long a bridge process may take before a test calls it hung.
 pub const T: Duration = Duration::from_secs(120);
+
+/// `qicp match --subscribe --matcher idc` on prefix `p`, writing to `out`.
+pub fn matcher(p: &str, out: &Path, extra: &[&str]) -> Proc {
+    let out = out.to_string_lossy().to_string();
+    let mut args = vec![
+        "match",
+        "--subscribe",
+        "--matcher",
+        "idc",
+        "--service-prefix",
+        p,
+        "--out",
+        &out,
+    ];
+    args.extend_from_slice(extra);
+    Proc::spawn("subscriber", &args)
+}
+
+/// `qicp sim PARK --publish --max-scans n` on prefix `p`.
+pub fn simulator(name: &'static str, p: &str, scans: usize, extra: &[&str]) -> Proc {
+    let n = scans.to_string();
+    let mut args = vec![
+        "sim",
+        PARK,
+        "--publish",
+        "--max-scans",
+        &n,
+        "--service-prefix",
+        p,
+    ];
+    args.extend_from_slice(extra);
+    Proc::spawn(name, &args)
+}
