@@ -35,6 +35,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod calibration;
 pub mod config;
 pub mod correlative;
 pub mod icp;

@@ -24,6 +24,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("relevance.novelty_distance", Acts::Map),
     ("motion.sigma_xy_per_m", Acts::Any),
     ("motion.sigma_theta_per_m_deg", Acts::Any),
+    ("motion.calibration_m", Acts::Map),
     ("validation.inlier_distance", Acts::Any),
     ("validation.max_share_drop", Acts::Any),
     ("validation.max_residual_ratio", Acts::Any),
