@@ -5,7 +5,7 @@
 mod bridge_procs;
 
 use bridge_procs::{
-    PARK, Proc, T, bridge_u64, prefix, publisher_report, simulator, summary, tempdir,
+    PARK, Proc, T, bridge_u64, prefix, publisher_report, simulator, subscriber, summary, tempdir,
 };
 use qicp::matching::{Matching, write_run};
 use qicp_matchers::{MatcherConfig, MatcherKind};
@@ -60,39 +60,19 @@ fn two_processes_reproduce_the_in_process_trajectory_in_either_start_order() {
     let dir = tempdir("same");
     let scans = 150;
     in_process(scans, MatcherKind::QWsm, &dir.join("inproc"));
-    let n = scans.to_string();
     for (order, subscriber_first) in [("sub-first", true), ("pub-first", false)] {
         let p = prefix(order);
         let out = dir.join(order);
-        let sub_args = [
-            "match",
-            "--subscribe",
-            "--matcher",
-            "q-wsm",
-            "--service-prefix",
-            &p,
-            "--out",
-        ];
-        let mut sub_args: Vec<&str> = sub_args.to_vec();
-        let out_s = out.to_string_lossy().to_string();
-        sub_args.push(&out_s);
-        let pub_args = [
-            "sim",
-            PARK,
-            "--publish",
-            "--max-scans",
-            &n,
-            "--service-prefix",
-            &p,
-        ];
+        let start_subscriber = || subscriber("q-wsm", &p, &out, &[]);
+        let start_publisher = || simulator("publisher", &p, scans, &[]);
         let (sub, publ) = if subscriber_first {
-            let s = Proc::spawn("subscriber", &sub_args);
+            let s = start_subscriber();
             std::thread::sleep(Duration::from_millis(300));
-            (s, Proc::spawn("publisher", &pub_args))
+            (s, start_publisher())
         } else {
-            let pb = Proc::spawn("publisher", &pub_args);
+            let pb = start_publisher();
             std::thread::sleep(Duration::from_millis(300));
-            (Proc::spawn("subscriber", &sub_args), pb)
+            (start_subscriber(), pb)
         };
         let (ps, pout, perr) = publ.wait(T);
         assert!(ps.success(), "publisher failed: {perr}");

@@ -97,12 +97,17 @@ pub const T: Duration = Duration::from_secs(120);
 
 /// `qicp match --subscribe --matcher idc` on prefix `p`, writing to `out`.
 pub fn matcher(p: &str, out: &Path, extra: &[&str]) -> Proc {
+    subscriber("idc", p, out, extra)
+}
+
+/// `qicp match --subscribe --matcher kind` on prefix `p`, writing to `out`.
+pub fn subscriber(kind: &str, p: &str, out: &Path, extra: &[&str]) -> Proc {
     let out = out.to_string_lossy().to_string();
     let mut args = vec![
         "match",
         "--subscribe",
         "--matcher",
-        "idc",
+        kind,
         "--service-prefix",
         p,
         "--out",
