@@ -178,7 +178,7 @@ impl Source {
     }
 
     /// Raw odometry at the laser times of held records (none for a log: see
-    /// [`stream::odometry_pass`](super::stream::odometry_pass)).
+    /// `stream::odometry_pass`).
     #[must_use]
     pub fn odometry(&self) -> Option<Vec<Stamped>> {
         match &self.records {
