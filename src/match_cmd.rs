@@ -8,7 +8,6 @@ use crate::logs::{LogOptions, LogReader};
 use crate::matching::{BagOutput, MatchLoop, RunWriter, progress_spinner};
 use anyhow::{Context, Result, bail};
 use qicp_matchers::MatcherConfig;
-use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Arguments of `qicp match`.
@@ -57,25 +56,16 @@ pub struct MatchArgs {
     pub bridge: crate::bridge_cmd::SubscribeArgs,
 }
 
-/// The order of a CARMEN log's records ([`RecordOrder`]), as `--order` and an experiment's
-/// `[source] order` give it: `RecordOrder` with clap's and serde's derives, which `qicp-io`
-/// does without (its names are [`RecordOrder::name`]'s).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
+/// The order of a CARMEN log's records ([`RecordOrder`]), as `--order` gives it:
+/// `RecordOrder` with clap's derive, which `qicp-io` does without (its names are
+/// [`RecordOrder::name`]'s).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum LogOrder {
     /// File order: the order the laser took them.
     #[default]
     File,
     /// Sorted by timestamp.
     Time,
-}
-
-impl LogOrder {
-    /// True for the default, file order.
-    #[must_use]
-    pub fn is_file(&self) -> bool {
-        *self == LogOrder::File
-    }
 }
 
 impl From<LogOrder> for RecordOrder {

@@ -171,8 +171,8 @@ pub struct ExperimentConfig {
 }
 
 impl ExperimentConfig {
-    /// Parses a TOML document and validates it against the matchers of `registry`. Relative paths stay as written; see
-    /// [`ExperimentConfig::resolve`].
+    /// Parses a TOML document and validates it against the matchers of `registry`. Relative
+    /// paths stay as written; see [`ExperimentConfig::resolve`].
     pub fn from_toml(text: &str, registry: &Registry) -> Result<Self, ExperimentError> {
         let c: Self = toml::from_str(text).map_err(|e| ExperimentError::Parse(e.to_string()))?;
         c.validate(registry)?;

@@ -384,8 +384,9 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             last: None,
             validator: Validator::new(ValidationParams::default()),
             search: CorrelativeSearch::new(CorrelativeParams::default()),
-            calibration: OdometryCalibration::new(MotionModel::default().calibration_m),
+            calibration: OdometryCalibration::default(),
         }
+        .with_motion_model(MotionModel::default())
     }
 
     /// Checks matches as `validation` says, searching with `correlative` where they look wrong.
@@ -404,7 +405,13 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     #[must_use]
     pub fn with_motion_model(mut self, motion: MotionModel) -> Self {
         self.motion = motion;
-        self.calibration = OdometryCalibration::new(motion.calibration_m);
+        // Against a map only: scan to scan the calibration stays off (see `calibration_m`).
+        let horizon = if self.policy.is_map() {
+            motion.calibration_m
+        } else {
+            0.0
+        };
+        self.calibration = OdometryCalibration::new(horizon);
         self
     }
 
@@ -511,11 +518,7 @@ where
             None => (record.odometry * offset, Pose2::IDENTITY, Pose2::IDENTITY),
             Some((odom, laser)) => {
                 let raw = offset.inverse() * odom.between(&record.odometry) * offset;
-                let step = if self.policy.is_map() {
-                    self.calibration.correct(&raw)
-                } else {
-                    raw
-                };
+                let step = self.calibration.correct(&raw);
                 (laser * step, step, raw)
             }
         };
@@ -534,7 +537,6 @@ where
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
         if let Some((_, before)) = self.last
-            && boosted
             && result.fallback.is_none()
             && !check.refused
             && !check.withheld
