@@ -40,7 +40,8 @@ pub use pose::{Pose2, normalize_angle};
 pub use quadtree::{QuadTree, QuadTreeN};
 pub use record::Record;
 pub use reference::{
-    LaserNoise, Merge, PointInfo, Reference, scan_point_info, surface_connections, surface_normal,
+    FullCell, LaserNoise, Merge, PointInfo, Reference, scan_point_info, surface_connections,
+    surface_normal,
 };
 pub use result::{Fallback, MatchResult};
 pub use scan::{BeamGeometry, BeamStatus, Scan, ScanError};

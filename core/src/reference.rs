@@ -5,7 +5,7 @@
 //! Incremental matching keeps one scan here; boosted matching keeps every relevant scan (paper
 //! Alg. 1). Either way the matcher sees the same type.
 
-use crate::index::{IndexError, SpatialIndex};
+use crate::index::{IndexError, Neighbour, PointId, SpatialIndex};
 use crate::{Pose2, Scan};
 use nalgebra::{Matrix2, Point2, Vector2};
 use serde::{Deserialize, Serialize};
@@ -194,10 +194,12 @@ pub struct Merge {
     pub resolution: f64,
     /// The cell cap, if any: the map is divided into square cells of this side (m)…
     pub cell_size: f64,
-    /// … and a cell holding this many points takes no more (0: no cap). A cell crossed by a
-    /// wall fills with the first passes' samples of it; later passes that land a little off
-    /// the wall add nothing there, so the map grows with the area explored, not with time.
+    /// … and a cell holds at most this many points (0: no cap), so the map grows with the
+    /// area explored, not with time. What a full cell does with a new point is
+    /// [`Merge::full_cell`].
     pub max_cell_points: u32,
+    /// What a full cell does with a new point that the spacing and the surface band admit.
+    pub full_cell: FullCell,
     /// A new point within this distance (m) of the surface through its nearest map point, when
     /// that point was held before the scan (the map's polyline through its samples,
     /// [`Reference::surface_foot`]), is not inserted:
@@ -208,6 +210,23 @@ pub struct Merge {
     pub surface_band: f64,
 }
 
+/// What a full cell of the cell cap ([`Merge::max_cell_points`]) does with a new point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FullCell {
+    /// The new point replaces the cell's point confirmed least recently: the one whose
+    /// surface no scan has landed on (within the spacing or the surface band) for longest,
+    /// such as a copy of a wall from a match that was off, or a chair since moved. Points
+    /// every revisit confirms stay; a point inserted or confirmed by the same scan is never
+    /// replaced (the new point is then skipped). The map keeps the places it sees, as they
+    /// look now. Replaced points leave the index lazily, in one rebuild once they make up an
+    /// eighth of it ([`Reference::stale_len`]), as ikd-Tree (FAST-LIO2) removes points.
+    #[default]
+    EvictStalest,
+    /// The new point is skipped: a full cell keeps its first points, right or wrong.
+    Skip,
+}
+
 impl Merge {
     /// Only the minimum spacing: no cell cap, no surface band.
     #[must_use]
@@ -216,6 +235,7 @@ impl Merge {
             resolution,
             cell_size: 0.0,
             max_cell_points: 0,
+            full_cell: FullCell::EvictStalest,
             surface_band: 0.0,
         }
     }
@@ -242,8 +262,15 @@ pub struct Reference<I> {
     scans: usize,
     /// True once a scan was merged into it ([`Reference::is_map`]).
     merged: bool,
-    /// Points per cell of the cell cap ([`Merge::max_cell_points`]).
-    cells: HashMap<(i64, i64), u32>,
+    /// The live points of each cell of the cell cap ([`Merge::max_cell_points`]), by id.
+    cells: HashMap<(i64, i64), Vec<PointId>>,
+    /// Per point: the number of the scan that inserted it or last landed on its surface
+    /// ([`FullCell::EvictStalest`]).
+    confirmed: Vec<u32>,
+    /// Per point: false once a full cell replaced it; it leaves the index at the next rebuild.
+    live: Vec<bool>,
+    /// Points replaced and still in the index.
+    stale: usize,
     /// The noise of the laser whose scans enter, and of the scans matched against them.
     noise: LaserNoise,
 }
@@ -267,6 +294,9 @@ impl<I: SpatialIndex> Reference<I> {
             scans: 0,
             merged: false,
             cells: HashMap::new(),
+            confirmed: Vec::new(),
+            live: Vec::new(),
+            stale: 0,
             noise,
         }
     }
@@ -289,10 +319,25 @@ impl<I: SpatialIndex> Reference<I> {
         &self.info
     }
 
-    /// Number of points.
+    /// Number of points in the index, those a full cell replaced and the next rebuild drops
+    /// included ([`Reference::stale_len`]).
     #[must_use]
     pub fn len(&self) -> usize {
         self.info.len()
+    }
+
+    /// Points a full cell replaced ([`FullCell::EvictStalest`]) that are still in the index:
+    /// fewer than an eighth of [`Reference::len`] after every insertion. Matchers may pair
+    /// with them until the rebuild; the map's own merge rules ignore them.
+    #[must_use]
+    pub fn stale_len(&self) -> usize {
+        self.stale
+    }
+
+    /// Whether point `id` is live (not replaced by a full cell).
+    #[must_use]
+    pub fn is_live(&self, id: PointId) -> bool {
+        self.live.get(id as usize).copied().unwrap_or(false)
     }
 
     /// True when there is nothing to match against.
@@ -344,6 +389,9 @@ impl<I: SpatialIndex> Reference<I> {
         self.scans = 0;
         self.merged = false;
         self.cells.clear();
+        self.confirmed.clear();
+        self.live.clear();
+        self.stale = 0;
     }
 
     /// Inserts the points of `scan`, seen from `pose` (the laser's pose in the reference
@@ -373,6 +421,8 @@ impl<I: SpatialIndex> Reference<I> {
             crate::index::check_point(p, self.index.len() + k)?;
         }
         let held = self.index.len();
+        // This scan's number, for the points it inserts or confirms.
+        let stamp = u32::try_from(self.scans).unwrap_or(u32::MAX);
         let mut inserted = 0;
         for (p, seen) in global.iter().zip(local) {
             let normal: Vector2<f64> = rot * seen.normal;
@@ -389,9 +439,10 @@ impl<I: SpatialIndex> Reference<I> {
                 let band = merge.surface_band;
                 let banded = band > 0.0 && band.is_finite();
                 // One search serves both rules: the nearest point within the spacing's reach
-                // is the nearest within the band's wider one.
+                // is the nearest within the band's wider one. A replaced point no longer
+                // counts: the new one may take its place.
                 let search = if banded { reach + band } else { reach };
-                let nearest = self.index.nearest_within(p, search * search);
+                let nearest = self.nearest_live(p, search);
                 // The nearest held point learns how finely its surface has been seen, whether
                 // or not this point is kept (the spacing's and the band's skips alike).
                 if let Some(n) = nearest.filter(|n| n.dist_sq <= reach * reach) {
@@ -400,6 +451,7 @@ impl<I: SpatialIndex> Reference<I> {
                     let other = &mut self.info[n.id as usize];
                     other.spacing = other.spacing.min(d.max(resolution));
                     if d < resolution {
+                        self.confirmed[n.id as usize] = stamp;
                         continue;
                     }
                 }
@@ -410,24 +462,107 @@ impl<I: SpatialIndex> Reference<I> {
                     && (n.id as usize) < held
                     && (self.surface_foot(n.id, p) - p).norm() <= band
                 {
+                    self.confirmed[n.id as usize] = stamp;
                     continue;
                 }
                 cell = merge.cell(p);
-                if cell.is_some_and(|c| {
-                    self.cells.get(&c).copied().unwrap_or(0) >= merge.max_cell_points
-                }) {
+                if let Some(c) = cell
+                    && !self.make_room(c, merge, stamp)
+                {
                     continue;
                 }
             }
-            self.index.insert(*p)?;
+            let id = self.index.insert(*p)?;
             if let Some(c) = cell {
-                *self.cells.entry(c).or_insert(0) += 1;
+                self.cells.entry(c).or_default().push(id);
             }
             self.info.push(info);
+            self.confirmed.push(stamp);
+            self.live.push(true);
             inserted += 1;
+        }
+        if self.stale > 0 && self.stale * STALE_SHARE >= self.info.len() {
+            self.rebuild()?;
         }
         self.scans += 1;
         self.merged |= merge.is_some();
         Ok(inserted)
     }
+
+    /// The live point nearest to `p` within `reach` (m): the nearest point, or, when a full
+    /// cell replaced it, the nearest of the rest.
+    fn nearest_live(&self, p: &Point2<f64>, reach: f64) -> Option<Neighbour> {
+        let nearest = self.index.nearest_within(p, reach * reach)?;
+        if self.live[nearest.id as usize] {
+            return Some(nearest);
+        }
+        let mut around = Vec::new();
+        self.index.within_radius(p, reach, &mut around);
+        around
+            .into_iter()
+            .filter(|n| self.live[n.id as usize])
+            .min_by(|a, b| a.dist_sq.total_cmp(&b.dist_sq).then(a.id.cmp(&b.id)))
+    }
+
+    /// Whether cell `c` can take one more point under `merge`'s cap, replacing its stalest
+    /// point if [`FullCell::EvictStalest`] says so.
+    fn make_room(&mut self, c: (i64, i64), merge: Merge, stamp: u32) -> bool {
+        let Some(ids) = self.cells.get_mut(&c) else {
+            return true;
+        };
+        if ids.len() < merge.max_cell_points as usize {
+            return true;
+        }
+        if merge.full_cell == FullCell::Skip {
+            return false;
+        }
+        let confirmed = &self.confirmed;
+        let Some((k, &stalest)) = ids
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, id)| confirmed[**id as usize])
+        else {
+            return true;
+        };
+        if confirmed[stalest as usize] >= stamp {
+            return false;
+        }
+        ids.swap_remove(k);
+        self.live[stalest as usize] = false;
+        self.stale += 1;
+        true
+    }
+
+    /// Drops the replaced points from the index: the live ones are inserted afresh, in their
+    /// order (ids change; nothing outside holds them between scans).
+    fn rebuild(&mut self) -> Result<(), IndexError> {
+        let points = self.index.points().to_vec();
+        self.index.clear();
+        let mut id_of = vec![PointId::MAX; points.len()];
+        let mut k = 0;
+        for (old, p) in points.iter().enumerate() {
+            if !self.live[old] {
+                continue;
+            }
+            id_of[old] = self.index.insert(*p)?;
+            self.info[k] = self.info[old];
+            self.confirmed[k] = self.confirmed[old];
+            k += 1;
+        }
+        self.info.truncate(k);
+        self.confirmed.truncate(k);
+        self.live.clear();
+        self.live.resize(k, true);
+        self.stale = 0;
+        for ids in self.cells.values_mut() {
+            for id in ids.iter_mut() {
+                *id = id_of[*id as usize];
+            }
+        }
+        Ok(())
+    }
 }
+
+/// Replaced points are dropped from the index once they make up this share's inverse of it
+/// (an eighth): one rebuild of the map's live points per `len / 8` replacements.
+const STALE_SHARE: usize = 8;

@@ -3,7 +3,8 @@
 
 use qicp_core::testdata::{SplitMix, SyntheticWorld};
 use qicp_core::{
-    BeamGeometry, BruteForce, KdTree, Merge, Point2, Pose2, QuadTree, Reference, Scan, SpatialIndex,
+    BeamGeometry, BruteForce, FullCell, KdTree, Merge, Point2, Pose2, QuadTree, Reference, Scan,
+    SpatialIndex,
 };
 use std::collections::HashMap;
 
@@ -40,33 +41,133 @@ fn revisits_in<I: SpatialIndex>(index: I, merge: Merge) -> Reference<I> {
     map
 }
 
+/// The live points of `map` (those no full cell replaced).
+fn live<I: SpatialIndex>(map: &Reference<I>) -> Vec<Point2<f64>> {
+    map.index()
+        .points()
+        .iter()
+        .enumerate()
+        .filter(|(id, _)| map.is_live(*id as u32))
+        .map(|(_, p)| *p)
+        .collect()
+}
+
 #[test]
 fn no_map_cell_holds_more_points_than_its_cap() {
+    for full_cell in [FullCell::EvictStalest, FullCell::Skip] {
+        let capped = Merge {
+            max_cell_points: 3,
+            cell_size: 0.1,
+            full_cell,
+            ..Merge::spacing(0.01)
+        };
+        let map = revisits(capped);
+        let points = live(&map);
+        let counts = cell_counts(&points, capped.cell_size);
+        let fullest = counts.values().copied().max().expect("points");
+        assert_eq!(
+            fullest, capped.max_cell_points,
+            "{full_cell:?}: cells fill up to the cap"
+        );
+        // The minimum spacing still holds among the live points under the cap (brute force).
+        for (i, p) in points.iter().enumerate() {
+            for q in &points[i + 1..] {
+                assert!((p - q).norm() >= capped.resolution, "{p} and {q}");
+            }
+        }
+        // Replaced points leave the index once they make up an eighth of it.
+        assert!(8 * map.stale_len() < map.len(), "{full_cell:?}");
+        assert_eq!(points.len() + map.stale_len(), map.len());
+        // Without the cap the same revisits pile more points into the same cells.
+        let spacing_only = revisits(Merge::spacing(0.01));
+        let uncapped = cell_counts(spacing_only.index().points(), capped.cell_size);
+        assert!(
+            uncapped.values().copied().max().expect("points") > 2 * capped.max_cell_points,
+            "the revisits must overfill cells for this test to mean anything: {:?}",
+            uncapped.values().max()
+        );
+        assert!(points.len() < spacing_only.len());
+    }
+}
+
+#[test]
+fn a_full_cell_replaces_the_point_confirmed_least_recently() {
+    // Square cells of 10 cm, the wall at y = 1.05 in the middle of a row of them (a look puts
+    // about eight of its samples into a cell), room for two looks in a cell, and a band of
+    // 5 mm: a look within it confirms the wall, one farther off enters.
+    let merge = |full_cell| Merge {
+        max_cell_points: 16,
+        cell_size: 0.1,
+        full_cell,
+        surface_band: 0.005,
+        ..Merge::spacing(0.0)
+    };
+    let build = |full_cell| {
+        let mut map = Reference::new(QuadTree::default());
+        let mut insert = |x0: f64, offset: f64| {
+            let (scan, pose) = wall_scan(x0, offset);
+            map.insert_scan(&scan, &pose, Some(merge(full_cell)))
+                .expect("finite")
+        };
+        assert_eq!(insert(0.0, 0.05), 41);
+        // A bad match copies the wall 3 cm behind itself; the cells it crosses fill up.
+        assert!(insert(0.0, 0.08) > 30);
+        // The robot sees the wall where it is: confirmed, nothing enters…
+        assert_eq!(insert(0.01, 0.052), 0);
+        // … and twice 1.5 cm off it (noise): new points, which full cells must make room for.
+        insert(0.02, 0.065);
+        insert(-0.02, 0.035);
+        map
+    };
+    let near_wall = |p: &Point2<f64>| (p.y - 1.05).abs() <= 0.016;
+    let evicting = build(FullCell::EvictStalest);
+    // The cells every look covers whole (the looks' ends, |x| > 0.2, may leave a cell short
+    // of full, and a cell with room replaces nothing).
+    let kept: Vec<_> = live(&evicting)
+        .into_iter()
+        .filter(|p| p.x.abs() < 0.2)
+        .collect();
+    assert!(
+        kept.iter().all(near_wall),
+        "the wrong copy outlived the looks that confirmed the wall: {:?}",
+        kept.iter().filter(|p| !near_wall(p)).collect::<Vec<_>>()
+    );
+    // A full cell that skips keeps the first copies it got, the wrong one among them.
+    let skipping = build(FullCell::Skip);
+    assert!(
+        live(&skipping).iter().filter(|p| !near_wall(p)).count() > 30,
+        "the skipping cap should keep the wrong copy"
+    );
+    // Every cell stays within its cap either way.
+    for map in [&evicting, &skipping] {
+        let counts = cell_counts(&live(map), 0.1);
+        assert!(counts.values().all(|&n| n <= 16), "{counts:?}");
+    }
+}
+
+#[test]
+fn an_evicting_cap_keeps_the_same_points_in_every_index() {
+    // Enough revisits that full cells replace points and the index is rebuilt without them.
     let capped = Merge {
         max_cell_points: 3,
         cell_size: 0.1,
+        surface_band: 0.005,
         ..Merge::spacing(0.01)
     };
-    let map = revisits(capped);
-    let counts = cell_counts(map.index().points(), capped.cell_size);
-    let fullest = counts.values().copied().max().expect("points");
-    assert_eq!(fullest, capped.max_cell_points, "cells fill up to the cap");
-    // The minimum spacing still holds under the cap (brute force).
-    let points = map.index().points();
-    for (i, p) in points.iter().enumerate() {
-        for q in &points[i + 1..] {
-            assert!((p - q).norm() >= capped.resolution, "{p} and {q}");
-        }
+    let quad = revisits(capped);
+    let brute = revisits_in(BruteForce::default(), capped);
+    let kd = revisits_in(KdTree::default(), capped);
+    assert_eq!(brute.index().points(), quad.index().points());
+    assert_eq!(kd.index().points(), quad.index().points());
+    assert_eq!(live(&brute), live(&quad));
+    assert_eq!(brute.stale_len(), quad.stale_len());
+    // The rebuilt quad tree answers as a brute-force search over its points does.
+    let mut rng = SplitMix::new(11);
+    for _ in 0..2000 {
+        let q = Point2::new(rng.range(-6.0, 6.0), rng.range(-6.0, 6.0));
+        let (a, b) = (quad.index().nearest(&q), brute.index().nearest(&q));
+        assert_eq!(a.map(|n| n.dist_sq), b.map(|n| n.dist_sq), "{q}");
     }
-    // Without the cap the same revisits pile more points into the same cells.
-    let spacing_only = revisits(Merge::spacing(0.01));
-    let uncapped = cell_counts(spacing_only.index().points(), capped.cell_size);
-    assert!(
-        uncapped.values().copied().max().expect("points") > 2 * capped.max_cell_points,
-        "the revisits must overfill cells for this test to mean anything: {:?}",
-        uncapped.values().max()
-    );
-    assert!(map.len() < spacing_only.len());
 }
 
 #[test]

@@ -8,7 +8,7 @@ use crate::icp::non_negative;
 use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 use crate::validation::{Check, Fit, ValidationParams, Validator, is_poor};
 use qicp_core::{
-    Fallback, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
+    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
     ScanMatcher, SpatialIndex,
 };
 use serde::{Deserialize, Serialize};
@@ -60,12 +60,17 @@ pub struct Relevance {
     pub novelty_distance: f64,
     /// Side of the square cells of the map's cell cap (m). Default 0.1.
     pub cell_size: f64,
-    /// A boosted map takes no more points into a cell of `cell_size` that holds this many
-    /// (0: no cap). Default 0 (off). At 20 (a straight wall sampled at WSM's 1 cm spacing
-    /// puts about ten points into each cell it crosses) the Intel map holds 129k points
-    /// instead of 165k, but the robustness sweep finds twice as many fragile variants: a
-    /// full cell keeps the first copy of its wall, right or wrong (see the README).
+    /// A boosted map holds at most this many points in a cell of `cell_size` (0: no cap, as
+    /// Alg. 1 reads), so its density stops growing with the visits. A straight wall sampled
+    /// at WSM's 1 cm spacing puts about ten points into each cell it crosses (IDC's 2 cm,
+    /// five). Default 0 (off): at 20 the Intel sweeps of q-wsm scored no better over both
+    /// record orders, and its default run broke in one of them (see the README).
     pub max_cell_points: u32,
+    /// What a full cell does with a new point: `"evict_stalest"` (default) replaces the
+    /// cell's point that scans have confirmed least recently; `"skip"` keeps its first points
+    /// (a full cell then keeps the first copy of its wall, right or wrong: with it, at 20, the
+    /// robustness sweep on Intel found twice as many fragile variants; see the README).
+    pub full_cell: FullCell,
     /// A boosted map holds only the most recent relevant scans: at least this many and at
     /// most half as many again (it is rebuilt from the newest `window_scans` when it reaches
     /// 1.5 × that), so memory and per-scan time stay bounded on a drive of any length, at the
@@ -95,6 +100,7 @@ impl Default for Relevance {
             novelty_distance: 0.05,
             cell_size: 0.1,
             max_cell_points: 0,
+            full_cell: FullCell::EvictStalest,
             window_scans: 0,
         }
     }
@@ -155,6 +161,7 @@ impl Relevance {
             resolution: self.map_resolution.unwrap_or(matcher_resolution),
             cell_size: self.cell_size,
             max_cell_points: self.max_cell_points,
+            full_cell: self.full_cell,
             surface_band: self.surface_band_sigmas.unwrap_or(matcher_band_sigmas) * range_sigma,
         }
     }
@@ -296,8 +303,15 @@ pub trait Odometry: Send + std::fmt::Debug {
     fn kind(&self) -> &str;
     /// Matches one record and updates the reference.
     fn process(&mut self, record: &Record) -> Estimate;
-    /// Points held in the reference (the whole map for boosted pipelines).
+    /// Points held in the reference (the whole map for boosted pipelines): those the matcher
+    /// pairs with, including any a full cell replaced that the map has not dropped yet
+    /// ([`Reference::stale_len`]).
     fn reference_points(&self) -> &[Point2<f64>];
+    /// The live points of the reference: [`Odometry::reference_points`] without those a full
+    /// cell replaced ([`qicp_core::FullCell::EvictStalest`]). The map as it stands.
+    fn live_points(&self) -> Vec<Point2<f64>> {
+        self.reference_points().to_vec()
+    }
 }
 
 /// The built-in reference policies, for [`Pipeline::new`] (any [`ReferencePolicy`] will do).
@@ -554,5 +568,17 @@ where
 
     fn reference_points(&self) -> &[Point2<f64>] {
         self.reference.index().points()
+    }
+
+    fn live_points(&self) -> Vec<Point2<f64>> {
+        let reference = &self.reference;
+        let points = reference.index().points();
+        if reference.stale_len() == 0 {
+            return points.to_vec();
+        }
+        (0..points.len())
+            .filter(|&id| reference.is_live(id as qicp_core::PointId))
+            .map(|id| points[id])
+            .collect()
     }
 }

@@ -19,6 +19,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("relevance.map_resolution", Acts::Map),
     ("relevance.surface_band_sigmas", Acts::Map),
     ("relevance.max_cell_points", Acts::Map),
+    ("relevance.cell_size", Acts::Map),
     ("relevance.window_scans", Acts::Map),
     ("relevance.min_novelty", Acts::Map),
     ("relevance.novelty_distance", Acts::Map),

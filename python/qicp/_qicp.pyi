@@ -148,7 +148,8 @@ class Matcher:
     def process_record(self, record: Record) -> MatchResult:
         """Matches one record of a log, exactly as ``qicp match`` does."""
     def map_points(self) -> npt.NDArray[np.float64]:
-        """The reference's points (a boosted matcher's whole map) as an N×2 array (m)."""
+        """The reference's points (a boosted matcher's whole map) as an N×2 array (m), without
+        those a full cell of the cell cap replaced."""
 
 def read_carmen(
     path: _StrPath,

@@ -148,10 +148,11 @@ impl Matcher {
         self.run(py, &record.0)
     }
 
-    /// The points of the reference (the whole map of a boosted matcher) as an N×2 array (m).
+    /// The points of the reference (the whole map of a boosted matcher) as an N×2 array (m),
+    /// without those a full cell replaced.
     fn map_points<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let odometry = lock(&self.odometry);
-        let points = odometry.reference_points();
+        let points = odometry.live_points();
         let flat: Vec<f64> = points.iter().flat_map(|p| [p.x, p.y]).collect();
         PyArray1::from_vec(py, flat).reshape([points.len(), 2])
     }
