@@ -218,6 +218,10 @@ fn bad_experiment_configs_name_the_key() {
             "source.world_seed",
         ),
         (
+            format!("[source]\nsim = \"{park}\"\norder = \"time\"\n"),
+            "source.order",
+        ),
+        (
             format!("[source]\nsim = \"{park}\"\n[run]\nmatchers = []\n"),
             "run.matchers",
         ),

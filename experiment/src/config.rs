@@ -229,11 +229,14 @@ impl ExperimentConfig {
                     ("source.odom_topic", s.odom_topic.is_some()),
                     ("source.odom_frame", s.odom_frame.is_some()),
                     ("source.base_frame", s.base_frame.is_some()),
+                    // A drive's records are made in time order; only a log's can be sorted.
+                    ("source.order", s.order != RecordOrder::File),
                 ] {
                     if set {
                         return Err(invalid(
                             key,
-                            "only for a `log` source (a simulated drive has its own ground truth)",
+                            "only for a `log` source (a simulated drive has its own ground \
+                             truth, topics and frames, and makes its records in time order)",
                         ));
                     }
                 }
