@@ -1,4 +1,4 @@
-//! `qicp sweep LOG --matcher KIND --relations FILE`: the command over
+//! `qicp sweep LOG --matcher KIND [--relations FILE]`: the command over
 //! [`qicp_runner::sweep`], which holds the variants, the runs and the report.
 
 use anyhow::Result;
@@ -19,9 +19,11 @@ pub struct SweepArgs {
     /// TOML file with a `[matcher]` table: the default configuration.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Freiburg relations file every run is scored with.
+    /// Freiburg relations file every run is scored with. Without it every variant is scored
+    /// against the default run: relations drawn along the default's trajectory (a segment
+    /// per metre or 30°), so the figures are disagreements with the default, not errors.
     #[arg(long)]
-    pub relations: PathBuf,
+    pub relations: Option<PathBuf>,
     /// Print the report as JSON on stdout (progress stays on stderr).
     #[arg(long)]
     pub json: bool,
@@ -62,7 +64,10 @@ pub fn run(args: SweepArgs) -> Result<()> {
         order: args.order.into(),
         ..crate::logs::carmen::CarmenOptions::default()
     };
-    let mut input = SweepInput::load_with(&args.log, &args.relations, args.scans, carmen)?;
+    let mut input = match &args.relations {
+        Some(relations) => SweepInput::load_with(&args.log, relations, args.scans, carmen)?,
+        None => SweepInput::against_default(&args.log, args.scans, carmen)?,
+    };
     if let Some(dir) = &args.trajectories {
         input = input.with_trajectories(dir)?;
     }
@@ -71,10 +76,15 @@ pub fn run(args: SweepArgs) -> Result<()> {
         .or_else(|| std::thread::available_parallelism().ok())
         .map_or(1, NonZeroUsize::get);
     eprintln!(
-        "sweeping {} on {} scans: default + {} variants, {jobs} at a time",
+        "sweeping {} on {} scans: default + {} variants, {jobs} at a time{}",
         config.kind(),
         input.scans,
-        variants.len()
+        variants.len(),
+        if input.against_default {
+            " (no relations: the default runs first, and each variant is scored against it)"
+        } else {
+            ""
+        }
     );
     let (default, reports) = run_sweep(
         &input,

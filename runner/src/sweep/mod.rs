@@ -2,7 +2,8 @@
 //! to its parameters (issue 12).
 //!
 //! The matcher runs on the log once as configured ("default") and once per variant, and every
-//! run is scored with the Freiburg relations. A variant perturbs one thing:
+//! run is scored with the Freiburg relations, or, for a log without relations, against the
+//! default run's own motion ([`SweepInput::against_default`]). A variant perturbs one thing:
 //!
 //! - **input variants** (deterministic, seeded): fewer scans ([`every_other_record`]), fewer
 //!   beams ([`every_other_beam`]), odometry drift ([`noisy_increment`]), a slipping wheel
@@ -22,6 +23,7 @@ use qicp_eval::stats::median;
 use qicp_eval::{RelationError, RelationProbe, evaluate_relations, relation_errors};
 use qicp_io::carmen::CarmenOptions;
 use qicp_io::relations::{Relation, read_relations};
+use qicp_io::tum::Stamped;
 use qicp_io::{LogOptions, LogReader};
 use qicp_matchers::MatcherConfig;
 use rand::{Rng, SeedableRng};
@@ -88,7 +90,13 @@ pub struct SweepReport {
     pub matcher: String,
     /// Records of the log used.
     pub scans: usize,
-    /// Relations in the relations file.
+    /// What the runs are scored with: `"relations"` (the relations file's) or `"default
+    /// run"` (relations drawn along the default run's trajectory, for a log without any:
+    /// [`SweepInput::against_default`]; the figures are then disagreements with the default,
+    /// and there are no ratios).
+    pub scored_against: &'static str,
+    /// Relations in the relations file (against the default run: the segments drawn along
+    /// its trajectory).
     pub relations_total: usize,
     /// The run with the configuration as given.
     pub default: RunFigures,
@@ -160,6 +168,9 @@ pub fn sweep(
     mut progress: impl FnMut(&str, &Result<RunFigures, String>, Duration),
 ) -> Result<(RunFigures, Vec<VariantReport>)> {
     let jobs_list = plan(config, variants);
+    if input.against_default {
+        return sweep_against_default(input, &jobs_list, jobs, progress);
+    }
     let mut results = run_parallel(
         &jobs_list,
         jobs,
@@ -185,6 +196,74 @@ pub fn sweep(
     Ok((default, reports))
 }
 
+/// [`sweep`] of an input without relations ([`SweepInput::against_default`]): the default runs
+/// alone first, keeping its poses (a pose per record in memory, besides the map); then the
+/// variants run `jobs` at a time, scored with the relations drawn along its trajectory.
+fn sweep_against_default(
+    input: &SweepInput,
+    jobs_list: &[Job],
+    jobs: usize,
+    mut progress: impl FnMut(&str, &Result<RunFigures, String>, Duration),
+) -> Result<(RunFigures, Vec<VariantReport>)> {
+    // The default runs alone first: its trajectory is what the variants are scored with.
+    let Some(default_job) = jobs_list.first() else {
+        bail!("a sweep has a default run");
+    };
+    let t0 = Instant::now();
+    let mut trajectory = Vec::with_capacity(input.scans);
+    let run = default_job.run_tracking(input, &mut trajectory);
+    // Segments end on records every variant keeps (`scans/2` keeps the even ones), so a
+    // variant is compared at the default's own times, never at a neighbour's.
+    let kept: Vec<Stamped> = trajectory.iter().step_by(2).copied().collect();
+    let relations = relations_along(&kept);
+    if run.is_ok() && relations.is_empty() {
+        bail!(
+            "the default run moved less than {SEGMENT_M} m and turned less than 30° \
+             over the {} scans: there is nothing to compare the variants' motion with",
+            input.scans
+        );
+    }
+    let scored = SweepInput {
+        log: input.log.clone(),
+        path: input.path.clone(),
+        options: input.options.clone(),
+        scans: input.scans,
+        relations,
+        against_default: true,
+        trajectories: input.trajectories.clone(),
+    };
+    // The default scored against its own motion: no error, every relation found.
+    let default = run
+        .and_then(|mut figures| {
+            figures.score(&trajectory, &scored.relations)?;
+            Ok(figures)
+        })
+        .map_err(|e| format!("{e:#}"));
+    drop(trajectory);
+    progress(&default_job.name, &default, t0.elapsed());
+    let default = default.map_err(|e| anyhow::anyhow!("the default run failed: {e}"))?;
+    let results = run_parallel(
+        &jobs_list[1..],
+        jobs,
+        |job| job.run(&scored),
+        |i, result, elapsed| {
+            if let Some(job) = jobs_list.get(i + 1) {
+                progress(&job.name, result, elapsed);
+            }
+        },
+    );
+    // No ratio: the default's own error is 0.
+    let reports = jobs_list[1..]
+        .iter()
+        .zip(results)
+        .map(|(job, result)| VariantReport {
+            ratio: None,
+            ..variant_report(&job.name, result, &default)
+        })
+        .collect();
+    Ok((default, reports))
+}
+
 fn fmt_f(v: f64, decimals: usize) -> String {
     if v.is_finite() {
         format!("{v:.decimals$}")
@@ -205,11 +284,20 @@ pub fn table(report: &SweepReport) -> String {
         .max()
         .unwrap_or(7);
     let mut out = String::new();
-    let _ = writeln!(
-        out,
-        "{} on {} ({} scans, {} relations in file)",
-        report.matcher, report.log, report.scans, report.relations_total
-    );
+    if report.scored_against == "relations" {
+        let _ = writeln!(
+            out,
+            "{} on {} ({} scans, {} relations in file)",
+            report.matcher, report.log, report.scans, report.relations_total
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "{} on {} ({} scans), scored against the default run: its motion over {} \
+             segments of {SEGMENT_M} m or 30°; errors are disagreements with it",
+            report.matcher, report.log, report.scans, report.relations_total
+        );
+    }
     let _ = writeln!(
         out,
         "{:width$}  {:>10}  {:>9}  {:>8}  {:>6}  {:>6}  {:>6}  {:>10}  {:>7}",
@@ -236,7 +324,8 @@ pub fn table(report: &SweepReport) -> String {
             fmt_f(f.ms_per_scan_median, 2),
         )
     };
-    let _ = writeln!(out, "{}", line("default", &report.default, Some(1.0)));
+    let own = (report.scored_against == "relations").then_some(1.0);
+    let _ = writeln!(out, "{}", line("default", &report.default, own));
     for v in &report.variants {
         match (&v.figures, &v.error) {
             (Some(f), _) => {
@@ -287,8 +376,12 @@ pub struct SweepInput {
     options: LogOptions,
     /// Records of the log the runs use.
     pub scans: usize,
-    /// The relations every run is scored with.
+    /// The relations every run is scored with (for a sweep against the default run, none
+    /// until the default has run: see [`SweepInput::against_default`]).
     pub relations: Vec<Relation>,
+    /// True when the runs are scored against the default run's trajectory rather than against
+    /// relations ([`SweepInput::against_default`]).
+    pub against_default: bool,
     /// Where each run writes its trajectory (see [`SweepInput::with_trajectories`]).
     trajectories: Option<PathBuf>,
 }
@@ -330,25 +423,9 @@ impl SweepInput {
             ..LogOptions::default()
         };
         let mut probe = RelationProbe::new(&relations, MAX_DT)?;
-        let mut reader = LogReader::open(log, &options)?;
-        let mut count = 0;
-        let mut span = (f64::NAN, f64::NAN);
-        for record in reader
-            .by_ref()
-            .take(scans.map_or(usize::MAX, NonZeroUsize::get))
-        {
-            let record = record.with_context(|| format!("reading {}", log.display()))?;
-            probe.push(record.timestamp(), record.odometry)?;
-            if count == 0 {
-                span.0 = record.timestamp();
-            }
-            span.1 = record.timestamp();
-            count += 1;
-        }
-        reader.warn(log);
-        if count == 0 {
-            return Err(reader.empty(log).into());
-        }
+        let (count, span) = count_records(log, &options, scans, |t, odometry| {
+            probe.push(t, odometry).map_err(anyhow::Error::from)
+        })?;
         let (found, _) = relation_errors(&probe.trajectory(), &relations, MAX_DT)?;
         if found.is_empty() {
             bail!(
@@ -365,6 +442,34 @@ impl SweepInput {
             options,
             scans: count,
             relations,
+            against_default: false,
+            trajectories: None,
+        })
+    }
+
+    /// A sweep of a log without relations (CARMEN read as `carmen` says, or a bag): every
+    /// variant is scored against the default run instead, with relations drawn along the
+    /// default's own trajectory ([`relations_along`]): a variant's `trans_mean` is then how
+    /// far its motion disagrees with the default's over each segment of about a metre, not
+    /// an error against the truth. A matcher that holds on a log agrees with itself under
+    /// small changes; a fragile one does not. Streams the log once to count its records.
+    pub fn against_default(
+        log: &Path,
+        scans: Option<NonZeroUsize>,
+        carmen: CarmenOptions,
+    ) -> Result<Self> {
+        let options = LogOptions {
+            carmen,
+            ..LogOptions::default()
+        };
+        let (count, _) = count_records(log, &options, scans, |_, _| Ok(()))?;
+        Ok(Self {
+            log: log.display().to_string(),
+            path: log.to_path_buf(),
+            options,
+            scans: count,
+            relations: Vec::new(),
+            against_default: true,
             trajectories: None,
         })
     }
@@ -403,6 +508,61 @@ impl SweepInput {
     }
 }
 
+/// Streams the first `scans` records of `log`, calling `each(timestamp, odometry)`; returns
+/// their count and the first and last timestamps. An unreadable or empty log is an error.
+fn count_records(
+    log: &Path,
+    options: &LogOptions,
+    scans: Option<NonZeroUsize>,
+    mut each: impl FnMut(f64, Pose2) -> Result<()>,
+) -> Result<(usize, (f64, f64))> {
+    let mut reader = LogReader::open(log, options)?;
+    let mut count = 0;
+    let mut span = (f64::NAN, f64::NAN);
+    for record in reader
+        .by_ref()
+        .take(scans.map_or(usize::MAX, NonZeroUsize::get))
+    {
+        let record = record.with_context(|| format!("reading {}", log.display()))?;
+        each(record.timestamp(), record.odometry)?;
+        if count == 0 {
+            span.0 = record.timestamp();
+        }
+        span.1 = record.timestamp();
+        count += 1;
+    }
+    reader.warn(log);
+    if count == 0 {
+        return Err(reader.empty(log).into());
+    }
+    Ok((count, span))
+}
+
+/// A segment of [`relations_along`] ends once the robot moved this far (m)…
+pub const SEGMENT_M: f64 = 1.0;
+/// … or turned this much (30°, in rad) since it began.
+pub const SEGMENT_RAD: f64 = std::f64::consts::PI / 6.0;
+
+/// Relations along a trajectory (time order): a chain of segments, each from a pose to the
+/// first later one that moved [`SEGMENT_M`] or turned [`SEGMENT_RAD`] from it, holding the
+/// trajectory's own motion over the segment. Scored against them, the trajectory itself has
+/// no error; another run of the same log has the error of its motion where it disagrees.
+#[must_use]
+pub fn relations_along(trajectory: &[(f64, Pose2)]) -> Vec<Relation> {
+    let mut relations = Vec::new();
+    let Some(&(mut t1, mut from)) = trajectory.first() else {
+        return relations;
+    };
+    for &(t2, to) in &trajectory[1..] {
+        let delta = from.between(&to);
+        if delta.translation().norm() >= SEGMENT_M || delta.theta.abs() >= SEGMENT_RAD {
+            relations.push(Relation { t1, t2, delta });
+            (t1, from) = (t2, to);
+        }
+    }
+    relations
+}
+
 /// The report of a sweep of `config` on `input`: the default run, the variants, the worst and
 /// the median ratio.
 #[must_use]
@@ -427,7 +587,16 @@ pub fn report(
         log: input.log.clone(),
         matcher: config.kind(),
         scans: input.scans,
-        relations_total: input.relations.len(),
+        scored_against: if input.against_default {
+            "default run"
+        } else {
+            "relations"
+        },
+        relations_total: if input.against_default {
+            default.relations
+        } else {
+            input.relations.len()
+        },
         relations_over_0_5_m: default.relations_over_0_5_m,
         default,
         worst_ratio,

@@ -1,6 +1,7 @@
 //! Runs in parallel over the cores, one variant at a time per core.
 
 use super::*;
+use qicp_io::tum::Stamped;
 use qicp_io::tum::write_tum_pose;
 
 /// The figures of one run.
@@ -86,12 +87,30 @@ impl Job {
     /// trajectory with its relations.
     /// With [`SweepInput::with_trajectories`] the run also writes its trajectory.
     pub fn run(&self, input: &SweepInput) -> Result<RunFigures> {
+        self.run_keeping(input, None)
+    }
+
+    /// [`Job::run`], also keeping every pose in `trajectory` (in the order matched), as a
+    /// sweep against the default run needs of its default.
+    pub fn run_tracking(
+        &self,
+        input: &SweepInput,
+        trajectory: &mut Vec<Stamped>,
+    ) -> Result<RunFigures> {
+        self.run_keeping(input, Some(trajectory))
+    }
+
+    fn run_keeping(
+        &self,
+        input: &SweepInput,
+        keep: Option<&mut Vec<Stamped>>,
+    ) -> Result<RunFigures> {
         let Some(path) = input.trajectory_path(&self.name) else {
-            return self.run_on(input.records()?, &input.relations);
+            return self.run_sinking(input.records()?, &input.relations, None, keep);
         };
         // Readable like every other output (0644), and on disk before it takes its name.
         let mut out = crate::output::OutputFile::create(&path)?;
-        let figures = self.run_writing(input.records()?, &input.relations, Some(&mut out))?;
+        let figures = self.run_sinking(input.records()?, &input.relations, Some(&mut out), keep)?;
         out.commit()?;
         Ok(figures)
     }
@@ -112,7 +131,17 @@ impl Job {
         &self,
         records: impl Iterator<Item = Result<Record>>,
         relations: &[Relation],
+        trajectory: Option<&mut dyn std::io::Write>,
+    ) -> Result<RunFigures> {
+        self.run_sinking(records, relations, trajectory, None)
+    }
+
+    fn run_sinking(
+        &self,
+        records: impl Iterator<Item = Result<Record>>,
+        relations: &[Relation],
         mut trajectory: Option<&mut dyn std::io::Write>,
+        mut keep: Option<&mut Vec<Stamped>>,
     ) -> Result<RunFigures> {
         let config = match &self.config {
             Ok(c) => c,
@@ -132,26 +161,44 @@ impl Job {
                 write_tum_pose(w, record.timestamp(), &estimate.pose)
                     .context("writing the trajectory")?;
             }
+            if let Some(k) = keep.as_mut() {
+                k.push((record.timestamp(), estimate.pose));
+            }
         }
         let summary = matcher.summary();
-        let trajectory = probe.trajectory();
-        let report = evaluate_relations(&trajectory, relations, MAX_DT)?;
-        let (errors, _) = relation_errors(&trajectory, relations, MAX_DT)?;
-        Ok(RunFigures {
-            trans_mean: report.trans_mean,
-            trans_max: report.trans_max,
-            rot_mean_deg: report.rot_mean_deg,
+        let mut figures = RunFigures {
+            trans_mean: f64::NAN,
+            trans_max: f64::NAN,
+            rot_mean_deg: f64::NAN,
             ms_per_scan_median: summary.ms_per_scan_median,
             map_points: summary.map_points,
             scans: summary.scans,
-            relations: report.n,
-            relations_missing: report.missing,
-            relations_over_0_5_m: errors
-                .iter()
-                .map(RelationError::trans)
-                .filter(|&e| e > FAILURE_M)
-                .count(),
-        })
+            relations: 0,
+            relations_missing: 0,
+            relations_over_0_5_m: 0,
+        };
+        figures.score(&probe.trajectory(), relations)?;
+        Ok(figures)
+    }
+}
+
+impl RunFigures {
+    /// Scores `trajectory` (the poses at the relations' times, or more) with `relations`:
+    /// sets the error figures and the relation counts.
+    pub fn score(&mut self, trajectory: &[Stamped], relations: &[Relation]) -> Result<()> {
+        let report = evaluate_relations(trajectory, relations, MAX_DT)?;
+        let (errors, _) = relation_errors(trajectory, relations, MAX_DT)?;
+        self.trans_mean = report.trans_mean;
+        self.trans_max = report.trans_max;
+        self.rot_mean_deg = report.rot_mean_deg;
+        self.relations = report.n;
+        self.relations_missing = report.missing;
+        self.relations_over_0_5_m = errors
+            .iter()
+            .map(RelationError::trans)
+            .filter(|&e| e > FAILURE_M)
+            .count();
+        Ok(())
     }
 }
 

@@ -323,3 +323,54 @@ fn robustness_figures_count_the_variants_over_the_bound_and_their_geometric_mean
     let (over, geomean) = robustness_figures(0.01, &[variant_with("nan", Some(f64::NAN))]);
     assert_eq!((over, geomean), (1, None));
 }
+
+#[test]
+fn relations_along_a_trajectory_hold_its_own_motion_per_metre_or_30_degrees() {
+    // Three metres in 10 cm steps, then a quarter turn in place in 5° steps.
+    let mut poses = straight(3.0, 30);
+    for k in 1..=18 {
+        poses.push(Pose2::new(3.0, 0.0, (5.0 * k as f64).to_radians()));
+    }
+    let trajectory: Vec<Stamped> = poses
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i as f64, *p))
+        .collect();
+    let relations = relations_along(&trajectory);
+    // Segments end on the first pose a metre on (three along x), then every 30° (three).
+    assert_eq!(relations.len(), 6, "{relations:?}");
+    assert!((relations[0].delta.x - 1.0).abs() < 1e-9 && relations[0].t1 == 0.0);
+    assert!((relations[5].delta.theta - 30f64.to_radians()).abs() < 1e-9);
+    // The trajectory agrees with itself, and so does a copy moved and turned as a whole.
+    let mut figures = RunFigures {
+        trans_mean: f64::NAN,
+        trans_max: f64::NAN,
+        rot_mean_deg: f64::NAN,
+        ms_per_scan_median: 0.0,
+        map_points: 0,
+        scans: trajectory.len(),
+        relations: 0,
+        relations_missing: 0,
+        relations_over_0_5_m: 0,
+    };
+    figures.score(&trajectory, &relations).expect("scores");
+    assert_eq!((figures.trans_mean, figures.relations), (0.0, 6));
+    let offset = Pose2::new(-4.0, 2.5, 1.1);
+    let moved: Vec<Stamped> = trajectory.iter().map(|(t, p)| (*t, offset * *p)).collect();
+    figures.score(&moved, &relations).expect("scores");
+    assert!(figures.trans_max < 1e-9, "{figures:?}");
+    // A run that slipped 20 cm along x in its second metre disagrees there, and only there.
+    let slipped: Vec<Stamped> = trajectory
+        .iter()
+        .map(|(t, p)| {
+            let slip = (p.x - 1.0).clamp(0.0, 1.0) * 0.2;
+            (*t, Pose2::new(p.x + slip, p.y, p.theta))
+        })
+        .collect();
+    figures.score(&slipped, &relations).expect("scores");
+    assert!((figures.trans_max - 0.2).abs() < 1e-9, "{figures:?}");
+    assert!((figures.trans_mean - 0.2 / 6.0).abs() < 1e-9, "{figures:?}");
+    // Too short a drive has no segment.
+    assert!(relations_along(&trajectory[..5]).is_empty());
+    assert!(relations_along(&[]).is_empty());
+}
