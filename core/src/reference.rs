@@ -340,6 +340,21 @@ impl<I: SpatialIndex> Reference<I> {
         self.live.get(id as usize).copied().unwrap_or(false)
     }
 
+    /// The live points (those no full cell replaced), in id order: the map as it stands.
+    #[must_use]
+    pub fn live_points(&self) -> Vec<Point2<f64>> {
+        let points = self.index.points();
+        if self.stale == 0 {
+            return points.to_vec();
+        }
+        points
+            .iter()
+            .zip(&self.live)
+            .filter(|(_, live)| **live)
+            .map(|(p, _)| *p)
+            .collect()
+    }
+
     /// True when there is nothing to match against.
     #[must_use]
     pub fn is_empty(&self) -> bool {

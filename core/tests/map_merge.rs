@@ -41,17 +41,6 @@ fn revisits_in<I: SpatialIndex>(index: I, merge: Merge) -> Reference<I> {
     map
 }
 
-/// The live points of `map` (those no full cell replaced).
-fn live<I: SpatialIndex>(map: &Reference<I>) -> Vec<Point2<f64>> {
-    map.index()
-        .points()
-        .iter()
-        .enumerate()
-        .filter(|(id, _)| map.is_live(*id as u32))
-        .map(|(_, p)| *p)
-        .collect()
-}
-
 #[test]
 fn no_map_cell_holds_more_points_than_its_cap() {
     for full_cell in [FullCell::EvictStalest, FullCell::Skip] {
@@ -62,7 +51,7 @@ fn no_map_cell_holds_more_points_than_its_cap() {
             ..Merge::spacing(0.01)
         };
         let map = revisits(capped);
-        let points = live(&map);
+        let points = map.live_points();
         let counts = cell_counts(&points, capped.cell_size);
         let fullest = counts.values().copied().max().expect("points");
         assert_eq!(
@@ -78,6 +67,14 @@ fn no_map_cell_holds_more_points_than_its_cap() {
         // Replaced points leave the index once they make up an eighth of it.
         assert!(8 * map.stale_len() < map.len(), "{full_cell:?}");
         assert_eq!(points.len() + map.stale_len(), map.len());
+        let by_id: Vec<_> = (0..map.len() as u32)
+            .filter(|&id| map.is_live(id))
+            .map(|id| map.index().points()[id as usize])
+            .collect();
+        assert_eq!(
+            points, by_id,
+            "{full_cell:?}: live points are those is_live names"
+        );
         // Without the cap the same revisits pile more points into the same cells.
         let spacing_only = revisits(Merge::spacing(0.01));
         let uncapped = cell_counts(spacing_only.index().points(), capped.cell_size);
@@ -123,7 +120,8 @@ fn a_full_cell_replaces_the_point_confirmed_least_recently() {
     let evicting = build(FullCell::EvictStalest);
     // The cells every look covers whole (the looks' ends, |x| > 0.2, may leave a cell short
     // of full, and a cell with room replaces nothing).
-    let kept: Vec<_> = live(&evicting)
+    let kept: Vec<_> = evicting
+        .live_points()
         .into_iter()
         .filter(|p| p.x.abs() < 0.2)
         .collect();
@@ -135,12 +133,17 @@ fn a_full_cell_replaces_the_point_confirmed_least_recently() {
     // A full cell that skips keeps the first copies it got, the wrong one among them.
     let skipping = build(FullCell::Skip);
     assert!(
-        live(&skipping).iter().filter(|p| !near_wall(p)).count() > 30,
+        skipping
+            .live_points()
+            .iter()
+            .filter(|p| !near_wall(p))
+            .count()
+            > 30,
         "the skipping cap should keep the wrong copy"
     );
     // Every cell stays within its cap either way.
     for map in [&evicting, &skipping] {
-        let counts = cell_counts(&live(map), 0.1);
+        let counts = cell_counts(&map.live_points(), 0.1);
         assert!(counts.values().all(|&n| n <= 16), "{counts:?}");
     }
 }
@@ -159,7 +162,7 @@ fn an_evicting_cap_keeps_the_same_points_in_every_index() {
     let kd = revisits_in(KdTree::default(), capped);
     assert_eq!(brute.index().points(), quad.index().points());
     assert_eq!(kd.index().points(), quad.index().points());
-    assert_eq!(live(&brute), live(&quad));
+    assert_eq!(brute.live_points(), quad.live_points());
     assert_eq!(brute.stale_len(), quad.stale_len());
     // The rebuilt quad tree answers as a brute-force search over its points does.
     let mut rng = SplitMix::new(11);

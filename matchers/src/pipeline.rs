@@ -571,14 +571,6 @@ where
     }
 
     fn live_points(&self) -> Vec<Point2<f64>> {
-        let reference = &self.reference;
-        let points = reference.index().points();
-        if reference.stale_len() == 0 {
-            return points.to_vec();
-        }
-        (0..points.len())
-            .filter(|&id| reference.is_live(id as qicp_core::PointId))
-            .map(|id| points[id])
-            .collect()
+        self.reference.live_points()
     }
 }

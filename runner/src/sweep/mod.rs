@@ -94,7 +94,7 @@ pub struct SweepReport {
     /// run"` (relations drawn along the default run's trajectory, for a log without any:
     /// [`SweepInput::against_default`]; the figures are then disagreements with the default,
     /// and there are no ratios).
-    pub scored_against: &'static str,
+    pub scored_against: ScoredAgainst,
     /// Relations in the relations file (against the default run: the segments drawn along
     /// its trajectory).
     pub relations_total: usize,
@@ -118,6 +118,17 @@ pub struct SweepReport {
     /// that a single lucky or unlucky variant moves less than the worst ratio, and a lucky
     /// default does not move at all (the ratios do).
     pub variants_geomean_trans_mean: Option<f64>,
+}
+
+/// What a sweep's runs are scored with ([`SweepReport::scored_against`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum ScoredAgainst {
+    /// The relations file's relations.
+    #[serde(rename = "relations")]
+    Relations,
+    /// Relations drawn along the default run's trajectory ([`SweepInput::against_default`]).
+    #[serde(rename = "default run")]
+    DefaultRun,
 }
 
 /// A variant is fragile when its mean error exceeds this many times the default's…
@@ -224,13 +235,8 @@ fn sweep_against_default(
         );
     }
     let scored = SweepInput {
-        log: input.log.clone(),
-        path: input.path.clone(),
-        options: input.options.clone(),
-        scans: input.scans,
         relations,
-        against_default: true,
-        trajectories: input.trajectories.clone(),
+        ..input.clone()
     };
     // The default scored against its own motion: no error, every relation found.
     let default = run
@@ -284,7 +290,7 @@ pub fn table(report: &SweepReport) -> String {
         .max()
         .unwrap_or(7);
     let mut out = String::new();
-    if report.scored_against == "relations" {
+    if report.scored_against == ScoredAgainst::Relations {
         let _ = writeln!(
             out,
             "{} on {} ({} scans, {} relations in file)",
@@ -324,7 +330,7 @@ pub fn table(report: &SweepReport) -> String {
             fmt_f(f.ms_per_scan_median, 2),
         )
     };
-    let own = (report.scored_against == "relations").then_some(1.0);
+    let own = (report.scored_against == ScoredAgainst::Relations).then_some(1.0);
     let _ = writeln!(out, "{}", line("default", &report.default, own));
     for v in &report.variants {
         match (&v.figures, &v.error) {
@@ -368,7 +374,7 @@ pub fn table(report: &SweepReport) -> String {
 
 /// A sweep's inputs, checked: the log, read afresh by every run (so that memory holds no
 /// log), and the relations every run is scored with.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct SweepInput {
     /// The log, as named in reports.
     pub log: String,
@@ -588,9 +594,9 @@ pub fn report(
         matcher: config.kind(),
         scans: input.scans,
         scored_against: if input.against_default {
-            "default run"
+            ScoredAgainst::DefaultRun
         } else {
-            "relations"
+            ScoredAgainst::Relations
         },
         relations_total: if input.against_default {
             default.relations

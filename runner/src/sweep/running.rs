@@ -106,11 +106,11 @@ impl Job {
         keep: Option<&mut Vec<Stamped>>,
     ) -> Result<RunFigures> {
         let Some(path) = input.trajectory_path(&self.name) else {
-            return self.run_sinking(input.records()?, &input.relations, None, keep);
+            return self.run_writing(input.records()?, &input.relations, None, keep);
         };
         // Readable like every other output (0644), and on disk before it takes its name.
         let mut out = crate::output::OutputFile::create(&path)?;
-        let figures = self.run_sinking(input.records()?, &input.relations, Some(&mut out), keep)?;
+        let figures = self.run_writing(input.records()?, &input.relations, Some(&mut out), keep)?;
         out.commit()?;
         Ok(figures)
     }
@@ -123,20 +123,12 @@ impl Job {
         records: impl Iterator<Item = Result<Record>>,
         relations: &[Relation],
     ) -> Result<RunFigures> {
-        self.run_writing(records, relations, None)
+        self.run_writing(records, relations, None, None)
     }
 
-    /// [`Job::run_on`], writing every pose to `trajectory` (TUM lines) as it is estimated.
+    /// [`Job::run_on`], writing every pose to `trajectory` (TUM lines) as it is estimated and
+    /// keeping it in `keep`, as asked.
     pub fn run_writing(
-        &self,
-        records: impl Iterator<Item = Result<Record>>,
-        relations: &[Relation],
-        trajectory: Option<&mut dyn std::io::Write>,
-    ) -> Result<RunFigures> {
-        self.run_sinking(records, relations, trajectory, None)
-    }
-
-    fn run_sinking(
         &self,
         records: impl Iterator<Item = Result<Record>>,
         relations: &[Relation],
