@@ -1,7 +1,8 @@
 //! Spatial-index benchmarks: building by insertion, nearest-neighbour queries and a cache
 //! refill (`nearest_and_around`, one pass against two searches), for the quad
 //! tree, the kd-tree and (up to 10k points) brute force, sweeping 1k … 1M points of the
-//! realistic `laser_scans` layout.
+//! realistic `laser_scans` layout; and IDC's matching-range rule over one scan's iterations
+//! against a map of the room (`matching_range`), the pairing q-idc spends most of its time in.
 //!
 //! How to run: `cargo bench -p qicp-core --bench index` (a few minutes), or
 //! `cargo bench -p qicp-core --bench index -- --test` to run each benchmark once as a smoke test.
@@ -13,8 +14,11 @@
 use criterion::{
     BenchmarkId, Criterion, SamplingMode, Throughput, criterion_group, criterion_main,
 };
-use qicp_core::testdata::laser_scans;
-use qicp_core::{BruteForce, KdTree, Point2, QuadTree, SpatialIndex, nearest_then_around};
+use qicp_core::testdata::{SplitMix, SyntheticWorld, laser_scans};
+use qicp_core::{
+    BruteForce, CorrespondenceMetric, KdTree, MatchingRange, Point2, Pose2, QuadTree, Query,
+    SpatialIndex, nearest_then_around,
+};
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -150,5 +154,74 @@ fn nearest_and_around(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, insertion, nearest, nearest_and_around);
+/// Scans matched per measured iteration of [`matching_range`].
+const RANGE_SCANS: usize = 20;
+/// Iterations per scan, the window narrowing from 15° to 1° and the gate from 1 m to 0.2 m
+/// as q-idc's schedule does, the estimate moving a few millimetres each time.
+const RANGE_ITERATIONS: usize = 10;
+
+/// The matching-range rule as q-idc runs it: a map of the room seen from 12 poses (every
+/// point, about as dense as an IDC map at 2 cm spacing), then scans from new poses paired over
+/// [`RANGE_ITERATIONS`] iterations each, from a start 5 cm and 2° off.
+fn matching_range(c: &mut Criterion) {
+    let room = SyntheticWorld::room();
+    let mut r = SplitMix::new(SEED);
+    let mut pose = || Pose2::new(r.range(-3.0, 3.0), r.range(-2.5, 2.5), r.range(-3.1, 3.1));
+    let mut map = QuadTree::default();
+    for k in 0..12 {
+        let at = pose();
+        for p in room.scan(&at, 0.01, k).points() {
+            let _ = map.insert(at.transform_point(p));
+        }
+    }
+    let scans: Vec<(Pose2, Vec<Point2<f64>>)> = (0..RANGE_SCANS as u64)
+        .map(|k| {
+            let at = pose();
+            (at, room.scan(&at, 0.01, 100 + k).points().to_vec())
+        })
+        .collect();
+    let mut g = c.benchmark_group("matching_range");
+    tune(&mut g, 0);
+    g.throughput(Throughput::Elements(RANGE_SCANS as u64));
+    let mut rule = MatchingRange::default();
+    let (mut moved, mut pairs) = (Vec::new(), Vec::new());
+    g.bench_function(BenchmarkId::new("scan", map.len()), |b| {
+        b.iter(|| {
+            let mut found = 0;
+            for (truth, local) in &scans {
+                rule.begin_scan(local);
+                for it in 0..RANGE_ITERATIONS {
+                    let f = it as f64 / (RANGE_ITERATIONS - 1) as f64;
+                    let left = 1.0 - f;
+                    let estimate = Pose2::new(
+                        truth.x + 0.05 * left,
+                        truth.y - 0.03 * left,
+                        truth.theta + 2f64.to_radians() * left,
+                    );
+                    rule.window = 15f64.to_radians() * (1.0f64 / 15.0).powf(f);
+                    moved.clear();
+                    moved.extend(local.iter().map(|p| estimate.transform_point(p)));
+                    let query = Query {
+                        local,
+                        points: &moved,
+                        pose: estimate,
+                        max_dist: 1.0 - 0.8 * f,
+                    };
+                    rule.pair(&map, black_box(&query), &mut pairs);
+                    found += pairs.len();
+                }
+            }
+            found
+        });
+    });
+    g.finish();
+}
+
+criterion_group!(
+    benches,
+    insertion,
+    nearest,
+    nearest_and_around,
+    matching_range
+);
 criterion_main!(benches);

@@ -294,12 +294,11 @@ impl CorrespondenceMetric for MatchingRange {
             let (mut lo_sq, mut hi_sq) = (-1.0, f64::INFINITY);
             for n in &search.found {
                 let d2 = dist_sq(&n.point, p);
-                if d2 > reach_sq {
-                    continue;
-                }
                 let e = n.point - o;
                 let re_sq = e.norm_squared();
-                if re_sq <= lo_sq || re_sq >= hi_sq {
+                // One branch, rarely taken, for the three tests (`&`, not `&&`): most
+                // candidates fail one of them, in no order a branch predictor could learn.
+                if !((d2 <= reach_sq) & (re_sq > lo_sq) & (re_sq < hi_sq)) {
                     continue;
                 }
                 let re = re_sq.sqrt();
