@@ -1,10 +1,15 @@
 """`qicp sweep` on Ray: every run of the sweep (the default and each variant) is one Ray task.
 
-    python examples/ray_sweep.py LOG RELATIONS [--matcher q-wsm | --config FILE] [--scans N]
+    python examples/ray_sweep.py LOG [RELATIONS] [--matcher q-wsm | --config FILE] [--scans N]
         [--variants a,b,...] [--address auto|local|ray://HOST:10001] [--out FILE]
+        [--drawn-relations FILE]
 
 Writes the JSON report of `qicp sweep LOG --matcher ... --relations RELATIONS --json`: the
-same runs, the same figures (only the wall times per scan differ), the same ratios.
+same runs, the same figures (only the wall times per scan differ), the same ratios. Without
+RELATIONS it is the report of `qicp sweep LOG --json`, a sweep against the default run: the
+default runs first (one task), writing the relations drawn along its trajectory to
+`--drawn-relations` (default: a temporary file, which on a cluster must be replaced by a path
+every node reads), and the variants' tasks are scored with them.
 
 On one machine, `--address local` starts a Ray instance for the sweep and stops it after. On a
 cluster, start Ray on the nodes (`ray start --head` on one, `ray start --address HEAD:6379` on
@@ -16,7 +21,9 @@ the log itself, so only the file names travel.
 
 import argparse
 import json
+import os
 import sys
+import tempfile
 
 import ray
 
@@ -34,10 +41,23 @@ def run(log, relations, name, matcher, config, scans, lenient):
         return str(e)
 
 
+@ray.remote
+def default_run(log, out, matcher, config, scans, lenient):
+    """The default run of a sweep without relations: its figures (it writes the relations
+    drawn along it to `out`), or the message of its failure."""
+    try:
+        return qicp.sweep_relations(
+            log, out, matcher=matcher, config=config, scans=scans, lenient=lenient
+        )
+    except qicp.QicpError as e:
+        return str(e)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("log")
-    ap.add_argument("relations")
+    ap.add_argument("relations", nargs="?", help="Freiburg relations (default: the default run's)")
+    ap.add_argument("--drawn-relations", help="where the default run's relations go (no RELATIONS)")
     ap.add_argument("--matcher", default="q-wsm")
     ap.add_argument("--config", help="TOML file with a [matcher] table (instead of --matcher)")
     ap.add_argument("--scans", type=int, help="use only the first N records of the log")
@@ -56,25 +76,47 @@ def main(argv=None) -> int:
         names = [n for n in names if n in wanted]
     names = ["default", *names]
 
+    against_default = a.relations is None
+    scratch = None
+    relations = a.relations
+    if against_default:
+        relations = a.drawn_relations
+        if relations is None:
+            scratch = tempfile.TemporaryDirectory(prefix="qicp-ray-sweep-")
+            relations = os.path.join(scratch.name, "default.relations")
+
+    def report_on(name, result):
+        if isinstance(result, str):
+            print(f"variant {name} failed: {result}", file=sys.stderr)
+        else:
+            print(f"variant {name} done (trans_mean {result['trans_mean']:.4f} m)", file=sys.stderr)
+
     ray.init(address=None if a.address == "local" else a.address, log_to_driver=False)
     try:
         args = (a.matcher, a.config, a.scans, a.lenient)
-        futures = [run.remote(a.log, a.relations, n, *args) for n in names]
         results = []
+        if against_default:
+            # The variants are scored with the default's trajectory: it runs first.
+            default = ray.get(default_run.remote(a.log, relations, *args))
+            report_on("default", default)
+            if isinstance(default, str):
+                sys.exit(f"the default run failed: {default}")
+            results.append(("default", default))
+            names = names[1:]
+        futures = [run.remote(a.log, relations, n, *args) for n in names]
         for name, future in zip(names, futures):
             result = ray.get(future)
             results.append((name, result))
-            if isinstance(result, str):
-                print(f"variant {name} failed: {result}", file=sys.stderr)
-            else:
-                print(f"variant {name} done (trans_mean {result['trans_mean']:.4f} m)", file=sys.stderr)
+            report_on(name, result)
     finally:
         ray.shutdown()
 
     report = qicp.sweep_report(
-        a.log, a.relations, results, matcher=a.matcher, config=a.config, scans=a.scans,
-        lenient=a.lenient,
+        a.log, relations, results, matcher=a.matcher, config=a.config, scans=a.scans,
+        lenient=a.lenient, against_default=against_default,
     )
+    if scratch is not None:
+        scratch.cleanup()
     if a.out:
         with open(a.out, "w") as f:
             f.write(report + "\n")

@@ -19,6 +19,7 @@ __all__ = [
     "read_bag",
     "read_carmen",
     "read_tum",
+    "sweep_relations",
     "sweep_report",
     "sweep_run",
     "sweep_variants",
@@ -214,6 +215,19 @@ def sweep_run(
 ) -> dict:
     """One run of ``qicp sweep``: its figures (the keys of a variant in ``--json``)."""
 
+def sweep_relations(
+    log: _StrPath,
+    out: _StrPath,
+    *,
+    matcher: str = "q-wsm",
+    config: Optional[_StrPath] = None,
+    scans: Optional[int] = None,
+    lenient: bool = False,
+) -> dict:
+    """The default run of a sweep on a log without relations (``qicp sweep LOG`` without
+    ``--relations``): writes to ``out`` the relations drawn along its trajectory, which the
+    variants' ``sweep_run`` calls are scored with, and returns its figures."""
+
 def sweep_report(
     log: _StrPath,
     relations: _StrPath,
@@ -223,6 +237,8 @@ def sweep_report(
     config: Optional[_StrPath] = None,
     scans: Optional[int] = None,
     lenient: bool = False,
+    against_default: bool = False,
 ) -> str:
     """The JSON report of ``qicp sweep --json`` from every run's figures or failure message,
-    the default first."""
+    the default first; with ``against_default``, that of a sweep against the default run
+    (``relations`` from ``sweep_relations``)."""

@@ -43,6 +43,68 @@ pub(crate) fn sweep_variants(matcher: &str, config: Option<PathBuf>) -> PyResult
         .collect())
 }
 
+/// The figures of a run as a dict (the keys of a variant in `qicp sweep --json`).
+fn figures_dict<'py>(
+    py: Python<'py>,
+    figures: &qicp_runner::sweep::RunFigures,
+) -> PyResult<Bound<'py, PyDict>> {
+    let value = serde_json::to_value(figures).map_err(refusal)?;
+    let d = PyDict::new(py);
+    if let serde_json::Value::Object(map) = value {
+        for (k, v) in map {
+            match v {
+                serde_json::Value::Number(n) if n.is_u64() => d.set_item(k, n.as_u64())?,
+                serde_json::Value::Number(n) => d.set_item(k, n.as_f64())?,
+                _ => d.set_item(k, f64::NAN)?,
+            }
+        }
+    }
+    Ok(d)
+}
+
+/// The default run of a sweep on a log without relations, as `qicp sweep LOG` (no
+/// `--relations`) makes it: the matcher as configured on the log's first `scans` records, and
+/// the relations drawn along its trajectory (a segment per metre driven or 30° turned, on the
+/// records every variant keeps), written to `out` in the Freiburg format, renamed into place
+/// when complete. Returns the default's figures (scored against them: no error). The
+/// variants are then `sweep_run(log, out, name)` and the report
+/// `sweep_report(log, out, results, against_default=True)`.
+#[pyfunction]
+#[pyo3(signature = (log, out, *, matcher = "q-wsm", config = None, scans = None,
+                    lenient = false))]
+pub(crate) fn sweep_relations<'py>(
+    py: Python<'py>,
+    log: PathBuf,
+    out: PathBuf,
+    matcher: &str,
+    config: Option<PathBuf>,
+    scans: Option<usize>,
+    lenient: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let config = sweep_config(matcher, config)?;
+    let job = qicp_runner::sweep::Job::named(&config, "default").map_err(|e| anyhow_refusal(&e))?;
+    let figures = py.detach(|| -> anyhow::Result<_> {
+        // The file is checked (and its temporary made) before any matching.
+        let mut file = qicp_runner::output::OutputFile::create(&out)?;
+        let carmen = qicp_io::carmen::CarmenOptions {
+            lenient,
+            ..Default::default()
+        };
+        let input = qicp_runner::sweep::SweepInput::against_default(
+            &log,
+            scans.and_then(std::num::NonZeroUsize::new),
+            carmen,
+        )?;
+        let (default, relations) = qicp_runner::sweep::default_relations(&input, &job)?;
+        let default = default.map_err(|e| anyhow::anyhow!("the default run failed: {e}"))?;
+        qicp_io::relations::write_relations(&mut file, &relations)
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+        file.commit()?;
+        Ok(default)
+    });
+    figures_dict(py, &figures.map_err(|e| anyhow_refusal(&e))?)
+}
+
 /// One run of `qicp sweep`: `variant` (`"default"` or a name of `sweep_variants`) of the
 /// matcher on the log's first `scans` records, scored with the relations. Returns the run's
 /// figures (the keys of a variant in `qicp sweep --json`); a run that cannot be made raises
@@ -73,28 +135,17 @@ pub(crate) fn sweep_run<'py>(
         )?;
         job.run(&input)
     });
-    let figures = figures.map_err(|e| anyhow_refusal(&e))?;
-    let value = serde_json::to_value(&figures).map_err(refusal)?;
-    let d = PyDict::new(py);
-    if let serde_json::Value::Object(map) = value {
-        for (k, v) in map {
-            match v {
-                serde_json::Value::Number(n) if n.is_u64() => d.set_item(k, n.as_u64())?,
-                serde_json::Value::Number(n) => d.set_item(k, n.as_f64())?,
-                _ => d.set_item(k, f64::NAN)?,
-            }
-        }
-    }
-    Ok(d)
+    figures_dict(py, &figures.map_err(|e| anyhow_refusal(&e))?)
 }
 
 /// The report of `qicp sweep --json` from the runs' results: `results` maps each run's name
 /// (`"default"` and the variants, in report order) to its figures (a dict of `sweep_run`) or
 /// to the message of its failure. Returns the report's JSON text, as `qicp sweep --json`
-/// prints it.
+/// prints it. With `against_default`, `relations` are those `sweep_relations` drew along the
+/// default run, and the report is that of `qicp sweep` without `--relations` (no ratios).
 #[pyfunction]
 #[pyo3(signature = (log, relations, results, *, matcher = "q-wsm", config = None, scans = None,
-                    lenient = false))]
+                    lenient = false, against_default = false))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sweep_report(
     py: Python<'_>,
@@ -105,10 +156,12 @@ pub(crate) fn sweep_report(
     config: Option<PathBuf>,
     scans: Option<usize>,
     lenient: bool,
+    against_default: bool,
 ) -> PyResult<String> {
-    use qicp_runner::sweep::{RunFigures, report, variant_report};
+    use qicp_runner::sweep::{RunFigures, VariantReport, report, variant_report};
     let config = sweep_config(matcher, config)?;
-    let input = py.detach(|| sweep_input(&log, &relations, scans, lenient))?;
+    let mut input = py.detach(|| sweep_input(&log, &relations, scans, lenient))?;
+    input.against_default = against_default;
     let figures = |v: &Bound<'_, PyAny>| -> PyResult<Result<RunFigures, String>> {
         if let Ok(message) = v.extract::<String>() {
             return Ok(Err(message));
@@ -143,7 +196,18 @@ pub(crate) fn sweep_report(
         }
     };
     let variants = runs
-        .map(|(name, v)| Ok(variant_report(name, figures(v)?, &default)))
+        .map(|(name, v)| {
+            let report = variant_report(name, figures(v)?, &default);
+            // Against the default run there is no ratio: the default's own error is 0.
+            Ok(if against_default {
+                VariantReport {
+                    ratio: None,
+                    ..report
+                }
+            } else {
+                report
+            })
+        })
         .collect::<PyResult<Vec<_>>>()?;
     let report = report(&input, &config, default, variants);
     serde_json::to_string_pretty(&report).map_err(refusal)

@@ -41,3 +41,25 @@ def test_the_ray_sweep_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path
 
     refused = subprocess.run([*script, *opts, "--variants", VARIANTS], capture_output=True, text=True)
     assert refused.returncode != 0 and "unknown variants nope.nothing*0.7" in refused.stderr
+
+
+def test_the_ray_sweep_without_relations_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path):
+    variants = "scans/2,odom-bias,relevance.tau_max*1.4"
+    cli = run_cli(
+        qicp_bin, "sweep", intel, "--matcher", "q-wsm", "--scans", SCANS,
+        "--variants", variants, "--json", "--jobs", "2",
+    )
+    assert cli.returncode == 0, cli.stderr
+    out, drawn = tmp_path / "ray.json", tmp_path / "default.relations"
+    script = [sys.executable, str(REPO / "examples" / "ray_sweep.py"), str(intel)]
+    opts = ["--matcher", "q-wsm", "--scans", SCANS, "--address", "local", "--variants", variants]
+    done = subprocess.run([*script, *opts, "--out", str(out), "--drawn-relations", str(drawn)],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    ours, theirs = json.loads(out.read_text()), json.loads(cli.stdout)
+    assert without_times(ours) == without_times(theirs)
+    assert ours["scored_against"] == "default run"
+    assert ours["default"]["trans_mean"] < 1e-9
+    assert all(v["ratio"] is None for v in ours["variants"])
+    # The drawn relations are the segments the variants were scored with.
+    assert len([l for l in drawn.read_text().splitlines() if l.strip()]) == ours["relations_total"]

@@ -221,31 +221,11 @@ fn sweep_against_default(
         bail!("a sweep has a default run");
     };
     let t0 = Instant::now();
-    let mut trajectory = Vec::with_capacity(input.scans);
-    let run = default_job.run_tracking(input, &mut trajectory);
-    // Segments end on records every variant keeps (`scans/2` keeps the even ones), so a
-    // variant is compared at the default's own times, never at a neighbour's.
-    let kept: Vec<Stamped> = trajectory.iter().step_by(2).copied().collect();
-    let relations = relations_along(&kept);
-    if run.is_ok() && relations.is_empty() {
-        bail!(
-            "the default run moved less than {SEGMENT_M} m and turned less than 30° \
-             over the {} scans: there is nothing to compare the variants' motion with",
-            input.scans
-        );
-    }
+    let (default, relations) = default_relations(input, default_job)?;
     let scored = SweepInput {
         relations,
         ..input.clone()
     };
-    // The default scored against its own motion: no error, every relation found.
-    let default = run
-        .and_then(|mut figures| {
-            figures.score(&trajectory, &scored.relations)?;
-            Ok(figures)
-        })
-        .map_err(|e| format!("{e:#}"));
-    drop(trajectory);
     progress(&default_job.name, &default, t0.elapsed());
     let default = default.map_err(|e| anyhow::anyhow!("the default run failed: {e}"))?;
     let results = run_parallel(
@@ -268,6 +248,37 @@ fn sweep_against_default(
         })
         .collect();
     Ok((default, reports))
+}
+
+/// The default run of a sweep against it ([`SweepInput::against_default`]): `default_job`
+/// (the configuration as given) on `input`, keeping its poses, and the relations drawn along
+/// its trajectory that the variants are scored with. Its figures are scored against them (no
+/// error, every relation found); a run that fails gives its message and no relations. `Err`
+/// when the run succeeded but moved too little to draw a relation.
+pub fn default_relations(
+    input: &SweepInput,
+    default_job: &Job,
+) -> Result<(Result<RunFigures, String>, Vec<Relation>)> {
+    let mut trajectory = Vec::with_capacity(input.scans);
+    let run = default_job.run_tracking(input, &mut trajectory);
+    // Segments end on records every variant keeps (`scans/2` keeps the even ones), so a
+    // variant is compared at the default's own times, never at a neighbour's.
+    let kept: Vec<Stamped> = trajectory.iter().step_by(2).copied().collect();
+    let relations = relations_along(&kept);
+    if run.is_ok() && relations.is_empty() {
+        bail!(
+            "the default run moved less than {SEGMENT_M} m and turned less than 30° \
+             over the {} scans: there is nothing to compare the variants' motion with",
+            input.scans
+        );
+    }
+    let default = run
+        .and_then(|mut figures| {
+            figures.score(&trajectory, &relations)?;
+            Ok(figures)
+        })
+        .map_err(|e| format!("{e:#}"));
+    Ok((default, relations))
 }
 
 fn fmt_f(v: f64, decimals: usize) -> String {
