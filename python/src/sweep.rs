@@ -16,6 +16,16 @@ fn sweep_config(matcher: &str, config: Option<PathBuf>) -> PyResult<MatcherConfi
     }
 }
 
+/// The run `variant` (`"default"` or a variant's name) of the matcher a sweep runs.
+fn sweep_job(
+    matcher: &str,
+    config: Option<PathBuf>,
+    variant: &str,
+) -> PyResult<qicp_runner::sweep::Job> {
+    let config = sweep_config(matcher, config)?;
+    qicp_runner::sweep::Job::named(&config, variant).map_err(|e| anyhow_refusal(&e))
+}
+
 /// An `anyhow` error as the command line prints it on one line.
 fn anyhow_refusal(e: &anyhow::Error) -> PyErr {
     QicpError::new_err(format!("{e:#}"))
@@ -81,8 +91,7 @@ pub(crate) fn sweep_relations<'py>(
     scans: Option<usize>,
     lenient: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let config = sweep_config(matcher, config)?;
-    let job = qicp_runner::sweep::Job::named(&config, "default").map_err(|e| anyhow_refusal(&e))?;
+    let job = sweep_job(matcher, config, "default")?;
     let figures = py.detach(|| -> anyhow::Result<_> {
         // The file is checked (and its temporary made) before any matching.
         let mut file = qicp_runner::output::OutputFile::create(&out)?;
@@ -124,8 +133,7 @@ pub(crate) fn sweep_run<'py>(
     scans: Option<usize>,
     lenient: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let config = sweep_config(matcher, config)?;
-    let job = qicp_runner::sweep::Job::named(&config, variant).map_err(|e| anyhow_refusal(&e))?;
+    let job = sweep_job(matcher, config, variant)?;
     let figures = py.detach(|| -> anyhow::Result<_> {
         let input = qicp_runner::sweep::SweepInput::load(
             &log,
