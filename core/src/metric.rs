@@ -169,14 +169,16 @@ impl NearestCache {
                         (best_d, best_k) = (d, k);
                     }
                 }
-                let best = (best_d <= max_dist_sq).then(|| {
-                    let n = &entry.found[best_k];
-                    Neighbour {
+                // No kept point (an empty disc) leaves `best_k` past the end: no answer here.
+                let best = entry
+                    .found
+                    .get(best_k)
+                    .filter(|_| best_d <= max_dist_sq)
+                    .map(|n| Neighbour {
                         id: n.id,
                         point: n.point,
                         dist_sq: best_d,
-                    }
-                });
+                    });
                 match best {
                     Some(b) if b.dist_sq <= inner_sq => return Some(b),
                     None if max_dist_sq <= inner_sq => return None,
@@ -444,6 +446,20 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// An entry that holds an empty disc (nothing within a gate) answers a later query with no
+    /// gate by a fresh search, not from its empty list.
+    #[test]
+    fn an_empty_cached_disc_asked_without_a_gate_searches_afresh() {
+        let mut map = QuadTree::default();
+        map.insert(Point2::new(5.0, 0.0)).expect("a finite point");
+        let mut cache = NearestCache::default();
+        cache.prepare(&map, 1);
+        let p = Point2::origin();
+        assert_eq!(cache.nearest_within(&map, 0, &p, 0.01), None);
+        let got = cache.nearest_within(&map, 0, &p, f64::INFINITY);
+        assert_eq!(got.map(|n| n.dist_sq), Some(25.0));
     }
 
     /// In a dense map an entry's slack narrows to the floor (a 5 cm slack would keep thousands
