@@ -454,13 +454,15 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         let fit_of = |validator: &Validator, reference: &Reference<I>, r: &MatchResult| Fit {
             share: validator.inlier_share(reference, local, &r.pose),
             residual: r.residual,
+            pairs: r.correspondences as f64,
         };
         let mut fit = match result.fallback {
             None => fit_of(&self.validator, &self.reference, &result),
             // Nothing within the gate: odometry may be far off, or the scan sees new ground.
-            Some(Fallback::TooFewCorrespondences { .. }) => Fit {
+            Some(Fallback::TooFewCorrespondences { found }) => Fit {
                 share: 0.0,
                 residual: f64::NAN,
+                pairs: found as f64,
             },
             Some(_) => return (result, Check::UNCHECKED),
         };

@@ -28,6 +28,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("motion.calibration_m", Acts::Map),
     ("validation.inlier_distance", Acts::Any),
     ("validation.max_share_drop", Acts::Any),
+    ("validation.max_pair_drop", Acts::Any),
     ("validation.max_residual_ratio", Acts::Any),
     ("validation.max_odometry_chi2", Acts::Map),
     ("correlative.window_xy", Acts::Any),
