@@ -166,7 +166,7 @@ pub(crate) fn sweep_report(
     lenient: bool,
     against_default: bool,
 ) -> PyResult<String> {
-    use qicp_runner::sweep::{RunFigures, VariantReport, report, variant_report};
+    use qicp_runner::sweep::{RunFigures, report, variant_report};
     let config = sweep_config(matcher, config)?;
     let mut input = py.detach(|| sweep_input(&log, &relations, scans, lenient))?;
     input.against_default = against_default;
@@ -204,18 +204,7 @@ pub(crate) fn sweep_report(
         }
     };
     let variants = runs
-        .map(|(name, v)| {
-            let report = variant_report(name, figures(v)?, &default);
-            // Against the default run there is no ratio: the default's own error is 0.
-            Ok(if against_default {
-                VariantReport {
-                    ratio: None,
-                    ..report
-                }
-            } else {
-                report
-            })
-        })
+        .map(|(name, v)| Ok(variant_report(name, figures(v)?, &default)))
         .collect::<PyResult<Vec<_>>>()?;
     let report = report(&input, &config, default, variants);
     serde_json::to_string_pretty(&report).map_err(refusal)

@@ -238,14 +238,10 @@ fn sweep_against_default(
             }
         },
     );
-    // No ratio: the default's own error is 0.
     let reports = jobs_list[1..]
         .iter()
         .zip(results)
-        .map(|(job, result)| VariantReport {
-            ratio: None,
-            ..variant_report(&job.name, result, &default)
-        })
+        .map(|(job, result)| variant_report(&job.name, result, &default))
         .collect();
     Ok((default, reports))
 }
@@ -581,7 +577,7 @@ pub fn relations_along(trajectory: &[(f64, Pose2)]) -> Vec<Relation> {
 }
 
 /// The report of a sweep of `config` on `input`: the default run, the variants, the worst and
-/// the median ratio.
+/// the median ratio (none for a sweep against the default run, whose own error is 0).
 #[must_use]
 pub fn report(
     input: &SweepInput,
@@ -589,6 +585,15 @@ pub fn report(
     default: RunFigures,
     variants: Vec<VariantReport>,
 ) -> SweepReport {
+    // Against the default run there is no ratio: the default's own error is 0.
+    let variants: Vec<VariantReport> = if input.against_default {
+        variants
+            .into_iter()
+            .map(|v| VariantReport { ratio: None, ..v })
+            .collect()
+    } else {
+        variants
+    };
     let ratios: Vec<(f64, &str)> = variants
         .iter()
         .filter_map(|v| v.ratio.map(|r| (r, v.name.as_str())))
