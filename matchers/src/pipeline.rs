@@ -229,6 +229,14 @@ pub struct MotionModel {
     /// robustness section: it helps there and hurts q-wsm in the simulated park, whose slip
     /// is not a fixed bias).
     pub calibration_m: f64,
+    /// Where odometry repeated one reading over several records while the matches saw the
+    /// robot move (they disagreed with it beyond its uncertainty), the first new reading is
+    /// applied to the pose of the repeat's first record, not to the previous one: a reading
+    /// that stalled and then caught up holds the whole motion since the stall began, and the
+    /// matches during the stall have followed part of it already. false applies every step
+    /// to the previous pose. Default true. (The MIT CSAIL log stalls three times for four
+    /// records and then jumps by up to 0.94 m and 85.5°; see the README.)
+    pub stall_restart: bool,
 }
 
 impl Default for MotionModel {
@@ -241,6 +249,7 @@ impl Default for MotionModel {
             sigma_theta_per_m_deg: 2.0,
             sigma_theta_per_rad: 0.2,
             calibration_m: 0.0,
+            stall_restart: true,
         }
     }
 }
@@ -354,6 +363,19 @@ impl<I: SpatialIndex> ReferenceStore for Store<'_, I> {
     }
 }
 
+/// Records that read one odometry value, from the first: a robot standing still, or odometry
+/// that stopped updating while the robot moved (the MIT CSAIL log repeats a reading four
+/// times, three times over, while the robot drives 0.5-0.9 m and turns up to 85°, and then
+/// jumps by all of it at once).
+#[derive(Debug, Clone, Copy)]
+struct OdometryRun {
+    /// Laser pose estimated at the run's first record.
+    start: Pose2,
+    /// Whether a match since then disagreed with odometry beyond its uncertainty
+    /// ([`Validator::disagrees`]): the scans saw the robot move where odometry read none.
+    contradicted: bool,
+}
+
 /// A matcher `M` with a reference held in index `I`.
 #[derive(Debug)]
 pub struct Pipeline<M, I> {
@@ -367,6 +389,8 @@ pub struct Pipeline<M, I> {
     reference_frame: Pose2,
     /// Odometry and estimated laser pose of the previous record.
     last: Option<(Pose2, Pose2)>,
+    /// The run of records that read the previous record's odometry (see [`OdometryRun`]).
+    run: Option<OdometryRun>,
     /// The check before insertion, and its search.
     validator: Validator,
     search: CorrelativeSearch,
@@ -396,6 +420,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             motion: MotionModel::default(),
             reference_frame: Pose2::IDENTITY,
             last: None,
+            run: None,
             validator: Validator::new(ValidationParams::default()),
             search: CorrelativeSearch::new(CorrelativeParams::default()),
             calibration: OdometryCalibration::default(),
@@ -530,12 +555,28 @@ where
         let offset = record.laser_offset;
         // The odometry motion since the previous record, as a motion of the laser.
         // Corrected by the calibration fitted so far: the prediction and the prior's centre.
-        let (predicted, step, raw) = match self.last {
-            None => (record.odometry * offset, Pose2::IDENTITY, Pose2::IDENTITY),
+        let fresh = self.last.is_none_or(|(odom, _)| record.odometry != odom);
+        // The pose the step is taken from: the previous record's, except where odometry
+        // stalled and the scans saw the robot move on meanwhile. Then the first new reading
+        // holds the whole motion since the stall began, which the matches have followed in
+        // part already: taken from the previous pose it would be counted twice.
+        let (predicted, step, raw, base) = match self.last {
+            None => (
+                record.odometry * offset,
+                Pose2::IDENTITY,
+                Pose2::IDENTITY,
+                None,
+            ),
             Some((odom, laser)) => {
                 let raw = offset.inverse() * odom.between(&record.odometry) * offset;
                 let step = self.calibration.correct(&raw);
-                (laser * step, step, raw)
+                let base = match self.run {
+                    Some(run) if fresh && run.contradicted && self.motion.stall_restart => {
+                        run.start
+                    }
+                    _ => laser,
+                };
+                (base * step, step, raw, Some(base))
             }
         };
         let guess = self.reference_frame.between(&predicted);
@@ -546,18 +587,27 @@ where
         // A refused match stays out of a map, and so does one that odometry contradicts
         // until a match agrees again. A scan-to-scan reference is replaced all the same: there
         // is no map to protect, and an older reference overlaps less.
-        check.withheld = boosted
-            && result.fallback.is_none()
+        let contradicted = result.fallback.is_none()
             && prior.is_some_and(|lambda| self.validator.disagrees(&lambda, &guess, &result.pose));
+        check.withheld = boosted && contradicted;
         let laser = self.reference_frame * result.pose;
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
-        if let Some((_, before)) = self.last
+        if let Some(before) = base
             && result.fallback.is_none()
             && !check.refused
             && !check.withheld
         {
             self.calibration.learn(&raw, &before.between(&laser));
+        }
+        match &mut self.run {
+            Some(run) if !fresh => run.contradicted |= contradicted,
+            _ => {
+                self.run = Some(OdometryRun {
+                    start: laser,
+                    contradicted: false,
+                });
+            }
         }
         self.last = Some((record.odometry, laser));
         Estimate {

@@ -30,7 +30,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("validation.max_share_drop", Acts::Any),
     ("validation.max_pair_drop", Acts::Any),
     ("validation.max_residual_ratio", Acts::Any),
-    ("validation.max_odometry_chi2", Acts::Map),
+    ("validation.max_odometry_chi2", Acts::Any),
     ("correlative.window_xy", Acts::Any),
     ("correlative.window_deg", Acts::Any),
 ];

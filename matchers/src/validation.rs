@@ -63,6 +63,8 @@ pub struct ValidationParams {
     /// slide of decimetres, or a turn of many degrees odometry never made, would otherwise be
     /// written into the map as a second copy of every wall. A match that snaps back onto the
     /// map after drift is withheld too, once: the next scan, predicted from it, agrees.
+    /// The same test tells a stalled odometry reading (`[matcher.motion] stall_restart`), scan
+    /// to scan too.
     pub max_odometry_chi2: f64,
 }
 

@@ -541,3 +541,61 @@ fn a_slipping_wheel_is_calibrated_where_the_scans_see_it_and_corrected_where_the
     assert!(plain > 0.3, "plain {plain:.3} m");
     assert!(calibrated < plain / 3.0, "calibrated {calibrated:.3} m");
 }
+
+/// The robot's pose at scan `k` of a fast turn in the room: 0.05 m and 11.5° a scan.
+fn turning(k: usize) -> Pose2 {
+    Pose2::new(-1.0 + 0.05 * k as f64, 0.5, 0.2 * k as f64)
+}
+
+/// Runs `config` over 30 scans of the fast turn whose odometry repeats its reading of scan 9
+/// for scans 10 to 13 and then reads the truth again (a stalled reading that catches up, as
+/// the MIT CSAIL log's does three times): the worst heading error (deg) from scan 14 on.
+fn stalled_turn_heading_error(config: MatcherConfig) -> f64 {
+    let world = SyntheticWorld::room();
+    let mut odometry = config.build().expect("builds");
+    let mut worst = 0.0f64;
+    for k in 0..30 {
+        let mut scan = world.scan(&turning(k), 0.005, k as u64 + 1);
+        scan.timestamp = k as f64;
+        let read = if (10..14).contains(&k) { 9 } else { k };
+        let r = Record {
+            scan,
+            odometry: turning(read),
+            truth: Some(turning(k)),
+            laser_offset: Pose2::IDENTITY,
+        };
+        let e = odometry.process(&r);
+        if k >= 14 {
+            let off = qicp_core::normalize_angle(e.pose.theta - turning(k).theta);
+            worst = worst.max(off.abs().to_degrees());
+        }
+    }
+    worst
+}
+
+#[test]
+fn a_stalled_odometry_reading_that_catches_up_is_not_counted_twice() {
+    // Applied to the previous pose, the first new reading turns q-wsm's estimate by the 46°
+    // the four stalled scans have turned already, and its map with it.
+    let mut plain = MatcherConfig::defaults(MatcherKind::QWsm);
+    plain.motion.stall_restart = false;
+    let counted_twice = stalled_turn_heading_error(plain);
+    assert!(
+        counted_twice > 10.0,
+        "q-wsm: applied to the previous pose the catch-up must break the heading ({counted_twice:.1}°)"
+    );
+    // IDC drops a prior that explains the scan badly, and a scan-to-scan reference is
+    // replaced by the stalled scans: they recover either way, and must with the restart too.
+    for kind in [
+        MatcherKind::QWsm,
+        MatcherKind::QIdc,
+        MatcherKind::Wsm,
+        MatcherKind::Idc,
+    ] {
+        let restarted = stalled_turn_heading_error(MatcherConfig::defaults(kind));
+        assert!(
+            restarted < 1.0,
+            "{kind}: worst heading error {restarted:.2}° after the stall"
+        );
+    }
+}
