@@ -21,8 +21,10 @@ pub enum Fallback {
     EmptyReference,
     /// The least-squares system was singular or produced a non-finite step.
     Degenerate,
-    /// The match explained the scan worse than the recent level and worse than the initial
-    /// guess, so the guess stands (see the matchers' validation).
+    /// The match was refused by validation (it explained the scan worse than the recent
+    /// level, or odometry contradicted it beyond its uncertainty) and the initial guess
+    /// explains the scan at least as well, so the guess stands (see the matchers'
+    /// validation).
     Refused,
 }
 

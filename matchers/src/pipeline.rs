@@ -590,6 +590,18 @@ where
         let contradicted = result.fallback.is_none()
             && prior.is_some_and(|lambda| self.validator.disagrees(&lambda, &guess, &result.pose));
         check.withheld = boosted && contradicted;
+        let mut result = result;
+        // Odometry says the match moved where the robot did not; where the scan cannot tell
+        // the two apart, odometry's pose stands, as after a refusal.
+        if check.withheld
+            && self.validator.params.veto_falls_back
+            && self
+                .validator
+                .inlier_share(&self.reference, record.scan.points(), &guess)
+                >= check.inlier_share
+        {
+            result = MatchResult::fallback(guess, Fallback::Refused);
+        }
         let laser = self.reference_frame * result.pose;
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);

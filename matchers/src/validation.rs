@@ -15,7 +15,10 @@
 //! 3. a match still below the level does not enter the map; where the prediction explains
 //!    the scan at least as well, the prediction is reported instead (a
 //!    [`Fallback::Refused`](qicp_core::Fallback::Refused)), so the next prediction does not
-//!    start from a match that went astray.
+//!    start from a match that went astray;
+//! 4. a match odometry contradicts beyond its uncertainty (`max_odometry_chi2`) does not enter
+//!    the map either, and falls back to the prediction where that explains the scan at least
+//!    as well (`veto_falls_back`).
 
 use crate::ConfigError;
 use crate::icp::positive;
@@ -66,6 +69,14 @@ pub struct ValidationParams {
     /// The same test tells a stalled odometry reading (`[matcher.motion] stall_restart`), scan
     /// to scan too.
     pub max_odometry_chi2: f64,
+    /// A match odometry's veto withholds falls back to the prediction (a
+    /// [`Fallback::Refused`](qicp_core::Fallback::Refused)) where the prediction explains at
+    /// least as large a share of the scan: the scans cannot tell the two apart, and odometry
+    /// says the match moved where the robot did not (a slide along a corridor), so the next
+    /// prediction starts from odometry's pose, as after a refusal. Where the match explains
+    /// the scan better (a recovery from odometry gone wrong) it is followed as before. false
+    /// follows every withheld match. Default true.
+    pub veto_falls_back: bool,
 }
 
 impl Default for ValidationParams {
@@ -80,6 +91,7 @@ impl Default for ValidationParams {
             search: true,
             max_refusals: 3,
             max_odometry_chi2: 16.3,
+            veto_falls_back: true,
         }
     }
 }

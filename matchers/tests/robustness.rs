@@ -4,8 +4,8 @@
 
 use qicp_core::testdata::SyntheticWorld;
 use qicp_core::{
-    FullCell, LaserNoise, MatchResult, Matrix3, MutualNearest, Pose2, QuadTree, Record, Reference,
-    Scan, ScanMatcher, SpatialIndex,
+    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, MutualNearest, Pose2, QuadTree, Record,
+    Reference, Scan, ScanMatcher, SpatialIndex,
 };
 use qicp_matchers::{
     CorrelativeParams, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind, Odometry, Pipeline,
@@ -218,9 +218,10 @@ fn a_slide_odometry_never_made_does_not_enter_the_map() {
     // In a featureless corridor a slide along the axis keeps every point on a wall, so the
     // share and residual checks pass it; only odometry (a 0.12 m step, σ 7.5 cm) can tell.
     let corridor = SyntheticWorld::featureless_corridor();
-    let run = |chi2: f64| {
+    let run = |chi2: f64, falls_back: bool| {
         let gate = ValidationParams {
             max_odometry_chi2: chi2,
+            veto_falls_back: falls_back,
             ..ValidationParams::default()
         };
         let mut pipeline = sabotaged_with(12, slid, gate);
@@ -232,24 +233,34 @@ fn a_slide_odometry_never_made_does_not_enter_the_map() {
             })
             .collect::<Vec<_>>()
     };
-    for (k, (e, added)) in run(ValidationParams::default().max_odometry_chi2)
-        .into_iter()
-        .enumerate()
-    {
-        assert!(!e.check.refused && !e.check.searched, "scan {k}: {e:?}");
-        if k == 11 {
-            // The 12th call matches scan 11: reported as matched, kept out of the map.
-            assert!(e.check.withheld && !e.inserted && added == 0, "{e:?}");
-            // (Along a featureless axis only odometry holds x, so even right matches drift by
-            // centimetres there.)
-            assert!(e.pose.x - truth(k).x > 0.3, "{e:?}");
-        } else {
-            // Good matches, and those that follow the slide as odometry does, go in.
-            assert!(!e.check.withheld && e.inserted, "scan {k}: {e:?}");
+    let chi2 = ValidationParams::default().max_odometry_chi2;
+    for falls_back in [true, false] {
+        let mut drift = 0.0;
+        for (k, (e, added)) in run(chi2, falls_back).into_iter().enumerate() {
+            assert!(!e.check.refused && !e.check.searched, "scan {k}: {e:?}");
+            // Along a featureless axis only odometry holds x, so even right matches drift by
+            // centimetres there: the slide is measured against the previous scan's drift.
+            let slide = e.pose.x - truth(k).x - drift;
+            drift = e.pose.x - truth(k).x;
+            if k == 11 {
+                // The 12th call matches scan 11: withheld, kept out of the map.
+                assert!(e.check.withheld && !e.inserted && added == 0, "{e:?}");
+                if falls_back {
+                    // The prediction explains the corridor as well: odometry's pose stands.
+                    assert_eq!(e.result.fallback, Some(Fallback::Refused), "{e:?}");
+                    assert!(slide.abs() < 1e-6, "slid {slide:.3} m: {e:?}");
+                } else {
+                    // Reported as matched, and followed.
+                    assert!(e.result.fallback.is_none() && slide > 0.3, "{e:?}");
+                }
+            } else {
+                // Good matches, and those that follow the slide as odometry does, go in.
+                assert!(!e.check.withheld && e.inserted, "scan {k}: {e:?}");
+            }
         }
     }
     // With the gate off the slide enters the map.
-    let (e, added) = run(0.0).swap_remove(11);
+    let (e, added) = run(0.0, true).swap_remove(11);
     assert!(!e.check.withheld && e.inserted && added > 0, "{e:?}");
 }
 
