@@ -17,6 +17,7 @@ Python package (each run's seconds include reading and parsing the log). Prints 
 """
 
 import argparse
+import itertools
 import json
 import math
 import pathlib
@@ -66,15 +67,18 @@ def matcher_config(params):
     return config
 
 
-def karto_run(log, a):
+def records(a):
+    """The log's records, the first `--scans` of them if given."""
+    return itertools.islice(qicp.read_carmen(a.log), a.scans or None)
+
+
+def karto_run(a):
     """Karto's trajectory (robot poses) and the seconds each match took."""
     matcher = karto.Wrapper(matcher_config(a.params))
     buffer, traj, match_s = [], [], []
     last_buffered = None
     prev_odom = prev_pose = None
-    for num, r in enumerate(qicp.read_carmen(log)):
-        if a.scans and num >= a.scans:
-            break
+    for num, r in enumerate(records(a)):
         n = len(r.ranges)
         config = karto.LaserScanConfig(
             r.angle_min,
@@ -125,16 +129,10 @@ def karto_run(log, a):
     return traj, match_s
 
 
-def qicp_run(log, a):
+def qicp_run(a):
     """The qicp matcher's trajectory over the same records, as `qicp match` runs it."""
     matcher = qicp.Matcher(a.matcher)
-    traj = []
-    for num, r in enumerate(qicp.read_carmen(log)):
-        if a.scans and num >= a.scans:
-            break
-        res = matcher.process_record(r)
-        traj.append((res.timestamp, *res.pose))
-    return traj
+    return [(res.timestamp, *res.pose) for res in map(matcher.process_record, records(a))]
 
 
 def main() -> None:
@@ -150,18 +148,18 @@ def main() -> None:
         "--range-threshold", type=float, help="m (default: 20 for slam_toolbox, 40 for karto)"
     )
     ap.add_argument("--scans", type=int, default=0, help="only the first N scans (0: all)")
-    ap.add_argument("--out", help="directory for karto.tum (default: a temporary one)")
+    ap.add_argument("--out", help="write Karto's trajectory to DIR/karto.tum (default: not written)")
     a = ap.parse_args()
     if a.range_threshold is None:
         a.range_threshold = 20.0 if a.params == "slam_toolbox" else 40.0
 
     t0 = time.perf_counter()
-    traj, match_s = karto_run(a.log, a)
+    traj, match_s = karto_run(a)
     karto_s = time.perf_counter() - t0
     karto_scores = qicp.evaluate_relations(traj, a.relations)
 
     t0 = time.perf_counter()
-    qicp_traj = qicp_run(a.log, a)
+    qicp_traj = qicp_run(a)
     qicp_s = time.perf_counter() - t0
     qicp_scores = qicp.evaluate_relations(qicp_traj, a.relations)
     if a.out:
@@ -179,7 +177,7 @@ def main() -> None:
                 "karto": {
                     **figures(karto_scores, karto_s),
                     "matches": len(match_s),
-                    "ms_per_match_median": 1e3 * statistics.median(match_s),
+                    "ms_per_match_median": 1e3 * statistics.median(match_s) if match_s else None,
                     "params": a.params,
                     "range_threshold_m": a.range_threshold,
                     "buffer": {
