@@ -28,6 +28,10 @@ mod validate;
 mod world;
 
 pub use robot::{DriveConfig, LaserConfig, RobotConfig};
+pub use validate::{
+    MAX_BEAMS, MAX_ENCODER_NOISE, MAX_WAYPOINT_TOLERANCE, MAX_WORLD_SIZE, MIN_LASER_RATE_HZ,
+    MIN_ZIGZAG_PERIOD,
+};
 pub use world::{CorridorConfig, ObstacleConfig, ParkConfig, WorldConfig, WorldKind};
 
 pub use qicp_core::ConfigError;

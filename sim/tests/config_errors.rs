@@ -118,3 +118,47 @@ fn defaults_and_shipped_configs_load_and_round_trip() {
     d.validate().expect("defaults are valid");
     assert_eq!(SimConfig::from_toml_str("").expect("empty"), d);
 }
+
+/// Values that used to crash the simulator (a capacity overflow, an allocation abort) or
+/// hang it are refused up front, naming the key; the bounds themselves still run.
+#[test]
+fn values_that_crashed_or_hung_the_simulator_are_refused_by_key() {
+    let corridor = "[world]\nkind = \"corridor\"\n[world.corridor]\n";
+    for (text, key) in [
+        ("[laser]\nbeams = 9223372036854775807\n", "laser.beams"),
+        ("[laser]\nbeams = 10001\n", "laser.beams"),
+        ("[world.park]\nsize = [1e308, 1e308]\n", "world.park.size"),
+        ("[world.park]\nsize = [nan, 40.0]\n", "world.park.size"),
+        ("[world.park]\nsize = [1000.5, 40.0]\n", "world.park.size"),
+        ("[robot]\nsize = [nan, 0.4]\n", "robot.size"),
+        ("[robot]\nsize = [0.5, nan]\n", "robot.size"),
+        ("[robot]\nencoder_noise = 1e308\n", "robot.encoder_noise"),
+        ("[laser]\nrate_hz = 1e-308\n", "laser.rate_hz"),
+        (
+            "[drive]\nwaypoint_tolerance = 1e5\n",
+            "drive.waypoint_tolerance",
+        ),
+    ] {
+        assert_eq!(invalid_key(text), key, "{text}");
+    }
+    for (line, key) in [
+        ("size = [1e308, 1e308]", "world.corridor.size"),
+        ("zigzag_period = 1e-308", "world.corridor.zigzag_period"),
+        ("wall_thickness = 100000.0", "world.corridor.wall_thickness"),
+        ("wall_thickness = 1.2", "world.corridor.wall_thickness"),
+    ] {
+        assert_eq!(invalid_key(&format!("{corridor}{line}\n")), key, "{line}");
+    }
+    // Huge numbers are shown in exponent form, not in 309 digits.
+    let msg = refused("[robot]\nencoder_noise = 1e308\n");
+    assert!(msg.contains("1e308") && msg.len() < 200, "{msg}");
+    for text in [
+        "[laser]\nbeams = 10000\n".to_string(),
+        "[world.park]\nsize = [1000.0, 1000.0]\n".to_string(),
+        "[robot]\nencoder_noise = 1.0\n".to_string(),
+        "[laser]\nrate_hz = 0.01\n".to_string(),
+        format!("{corridor}zigzag_period = 0.1\nwall_thickness = 1.19\n"),
+    ] {
+        SimConfig::from_toml_str(&text).unwrap_or_else(|e| panic!("{text}: {e}"));
+    }
+}

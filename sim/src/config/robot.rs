@@ -28,7 +28,7 @@ pub struct RobotConfig {
     /// Larger means softer tyres and more creep. Default 0.1.
     pub tyre_slip: f64,
     /// Random encoder error: standard deviation of each wheel's travel error per √metre of
-    /// travel (m/√m). Default 0.
+    /// travel (m/√m), at most [`MAX_ENCODER_NOISE`](super::MAX_ENCODER_NOISE). Default 0.
     pub encoder_noise: f64,
     /// Systematic encoder error of the left and right wheel, as a relative scale error
     /// (0.01: the wheel reports 1 % more travel than it turned). Default [0, 0].
@@ -56,7 +56,7 @@ impl Default for RobotConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LaserConfig {
-    /// Number of beams. Default 181.
+    /// Number of beams, at most [`MAX_BEAMS`](super::MAX_BEAMS). Default 181.
     pub beams: usize,
     /// Field of view, centred on the heading (degrees). Default 180.
     pub fov_deg: f64,
@@ -66,7 +66,7 @@ pub struct LaserConfig {
     pub min_range: f64,
     /// Standard deviation of the Gaussian range noise (m). Default 0.01.
     pub range_sigma: f64,
-    /// Scans per second. Default 1.
+    /// Scans per second, at least [`MIN_LASER_RATE_HZ`](super::MIN_LASER_RATE_HZ). Default 1.
     pub rate_hz: f64,
     /// Forward offset of the laser from the robot origin (m). Default 0.
     pub offset_x: f64,
@@ -101,7 +101,8 @@ pub struct DriveConfig {
     pub accel: f64,
     /// Commanded angular acceleration (deg/s²). Default 180.
     pub angular_accel_deg: f64,
-    /// Distance at which an intermediate waypoint counts as reached (m). Default 0.5.
+    /// Distance at which an intermediate waypoint counts as reached (m), at most
+    /// [`MAX_WAYPOINT_TOLERANCE`](super::MAX_WAYPOINT_TOLERANCE). Default 0.5.
     pub waypoint_tolerance: f64,
     /// Seed of the laser and encoder noise. Default 1.
     pub seed: u64,

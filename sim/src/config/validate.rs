@@ -2,6 +2,21 @@
 
 use super::{ConfigError, ObstacleConfig, SimConfig, WorldKind};
 
+/// Largest side of a park or a corridor floor (m): the route, the rooms and the obstacles'
+/// placement scale with it, and a kilometre is far beyond any laser's reach.
+pub const MAX_WORLD_SIZE: f64 = 1_000.0;
+/// Most beams a simulated laser may have: the CARMEN reader's default `--max-beams`, so a
+/// simulated log always reads back.
+pub const MAX_BEAMS: usize = 10_000;
+/// Smallest zigzag period (m): the route gets a waypoint every period.
+pub const MIN_ZIGZAG_PERIOD: f64 = 0.1;
+/// Largest random encoder error (m/√m): beyond it the encoders report noise, not travel.
+pub const MAX_ENCODER_NOISE: f64 = 1.0;
+/// Slowest laser (scans per second): one scan a minute and a half.
+pub const MIN_LASER_RATE_HZ: f64 = 0.01;
+/// Largest waypoint tolerance (m): beyond it every waypoint of a route counts as reached.
+pub const MAX_WAYPOINT_TOLERANCE: f64 = 5.0;
+
 impl SimConfig {
     /// Refuses values that cannot work, naming the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -40,7 +55,7 @@ impl SimConfig {
 
     fn validate_park(&self) -> Result<(), ConfigError> {
         let p = self.park();
-        positive("world.park.size", p.size[0].min(p.size[1]))?;
+        size("world.park.size", p.size)?;
         let [r0, r1] = p.tree_radius;
         if !(r0.is_finite() && r1.is_finite() && r0 > 0.0 && r0 <= r1) {
             return invalid(
@@ -62,14 +77,18 @@ impl SimConfig {
 
     fn validate_corridor(&self) -> Result<(), ConfigError> {
         let c = self.corridor();
-        positive("world.corridor.size", c.size[0].min(c.size[1]))?;
+        size("world.corridor.size", c.size)?;
         positive("world.corridor.corridor_width", c.corridor_width)?;
         positive("world.corridor.outer_room_depth", c.outer_room_depth)?;
         positive("world.corridor.inner_room_depth", c.inner_room_depth)?;
         positive("world.corridor.room_width", c.room_width)?;
         positive("world.corridor.door_width", c.door_width)?;
         positive("world.corridor.wall_thickness", c.wall_thickness)?;
-        positive("world.corridor.zigzag_period", c.zigzag_period)?;
+        at_least(
+            "world.corridor.zigzag_period",
+            c.zigzag_period,
+            MIN_ZIGZAG_PERIOD,
+        )?;
         non_negative("world.corridor.zigzag_amplitude", c.zigzag_amplitude)?;
         let core = c.size[0].min(c.size[1])
             - 2.0 * (c.outer_room_depth + c.corridor_width + c.inner_room_depth);
@@ -77,6 +96,15 @@ impl SimConfig {
             return invalid(
                 "world.corridor.size",
                 "is too small for the corridor and its rooms".into(),
+            );
+        }
+        if c.wall_thickness >= c.corridor_width / 2.0 {
+            return invalid(
+                "world.corridor.wall_thickness",
+                format!(
+                    "is {}: must be below half the corridor's width",
+                    num(c.wall_thickness)
+                ),
             );
         }
         if c.door_width >= c.room_width {
@@ -101,7 +129,8 @@ impl SimConfig {
     fn validate_robot(&self) -> Result<(), ConfigError> {
         let r = &self.robot;
         positive("robot.mass", r.mass)?;
-        positive("robot.size", r.size[0].min(r.size[1]))?;
+        positive("robot.size", r.size[0])?;
+        positive("robot.size", r.size[1])?;
         positive("robot.wheel_base", r.wheel_base)?;
         positive("robot.max_wheel_speed", r.max_wheel_speed)?;
         positive("robot.max_wheel_accel", r.max_wheel_accel)?;
@@ -115,6 +144,15 @@ impl SimConfig {
         }
         positive("robot.tyre_slip", r.tyre_slip)?;
         non_negative("robot.encoder_noise", r.encoder_noise)?;
+        if r.encoder_noise > MAX_ENCODER_NOISE {
+            return invalid(
+                "robot.encoder_noise",
+                format!(
+                    "is {}: at most {MAX_ENCODER_NOISE} m/√m",
+                    num(r.encoder_noise)
+                ),
+            );
+        }
         for b in r.encoder_bias {
             if !(b.is_finite() && b.abs() < 0.5) {
                 return invalid("robot.encoder_bias", format!("has {b}: needs |bias| < 0.5"));
@@ -125,10 +163,10 @@ impl SimConfig {
 
     fn validate_laser(&self) -> Result<(), ConfigError> {
         let l = &self.laser;
-        if l.beams == 0 {
+        if l.beams == 0 || l.beams > MAX_BEAMS {
             return invalid(
                 "laser.beams",
-                "is 0: a laser needs at least one beam".into(),
+                format!("is {}: needs 1 to {MAX_BEAMS} beams", l.beams),
             );
         }
         if !(l.fov_deg.is_finite() && l.fov_deg > 0.0 && l.fov_deg <= 360.0) {
@@ -143,7 +181,7 @@ impl SimConfig {
             return invalid("laser.min_range", "must be below laser.max_range".into());
         }
         non_negative("laser.range_sigma", l.range_sigma)?;
-        positive("laser.rate_hz", l.rate_hz)?;
+        at_least("laser.rate_hz", l.rate_hz, MIN_LASER_RATE_HZ)?;
         if !l.offset_x.is_finite() {
             return invalid("laser.offset_x", "must be finite".into());
         }
@@ -183,6 +221,15 @@ impl SimConfig {
         positive("drive.accel", d.accel)?;
         positive("drive.angular_accel_deg", d.angular_accel_deg)?;
         positive("drive.waypoint_tolerance", d.waypoint_tolerance)?;
+        if d.waypoint_tolerance > MAX_WAYPOINT_TOLERANCE {
+            return invalid(
+                "drive.waypoint_tolerance",
+                format!(
+                    "is {} m: at most {MAX_WAYPOINT_TOLERANCE} m (every waypoint would count as reached)",
+                    num(d.waypoint_tolerance)
+                ),
+            );
+        }
         positive("drive.physics_hz", d.physics_hz)?;
         if d.physics_hz < self.laser.rate_hz {
             return invalid(
@@ -241,7 +288,35 @@ fn positive(key: &'static str, v: f64) -> Result<(), ConfigError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        invalid(key, format!("is {v}: must be finite and positive"))
+        invalid(key, format!("is {}: must be finite and positive", num(v)))
+    }
+}
+
+/// Both sides of a floor: finite, positive and at most [`MAX_WORLD_SIZE`].
+fn size(key: &'static str, [w, h]: [f64; 2]) -> Result<(), ConfigError> {
+    positive(key, w)?;
+    positive(key, h)?;
+    if w.max(h) > MAX_WORLD_SIZE {
+        return invalid(
+            key,
+            format!(
+                "is [{}, {}]: each side at most {MAX_WORLD_SIZE} m",
+                num(w),
+                num(h)
+            ),
+        );
+    }
+    Ok(())
+}
+
+fn at_least(key: &'static str, v: f64, min: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= min {
+        Ok(())
+    } else {
+        invalid(
+            key,
+            format!("is {}: must be finite and at least {min}", num(v)),
+        )
     }
 }
 
@@ -249,6 +324,20 @@ fn non_negative(key: &'static str, v: f64) -> Result<(), ConfigError> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
     } else {
-        invalid(key, format!("is {v}: must be finite and non-negative"))
+        invalid(
+            key,
+            format!("is {}: must be finite and non-negative", num(v)),
+        )
+    }
+}
+
+/// A value as a message shows it: in exponent form when it is huge or tiny (1e308, not 309
+/// digits).
+fn num(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && a.is_finite() && !(1e-4..1e9).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
     }
 }

@@ -60,7 +60,8 @@ impl Default for WorldConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ParkConfig {
-    /// Width and height of the park (m). Default 80 × 40.
+    /// Width and height of the park (m), each at most [`MAX_WORLD_SIZE`](super::MAX_WORLD_SIZE).
+    /// Default 80 × 40.
     pub size: [f64; 2],
     /// Number of trees. Default 12.
     pub trees: usize,
@@ -98,7 +99,8 @@ impl Default for ParkConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CorridorConfig {
-    /// Outer size of the floor (m). Default 30 × 30.
+    /// Outer size of the floor (m), each side at most
+    /// [`MAX_WORLD_SIZE`](super::MAX_WORLD_SIZE). Default 30 × 30.
     pub size: [f64; 2],
     /// Free width of the corridor (m). Default 2.4.
     pub corridor_width: f64,
@@ -110,9 +112,10 @@ pub struct CorridorConfig {
     pub room_width: f64,
     /// Width of a doorway (m). Default 1.0.
     pub door_width: f64,
-    /// Wall thickness (m). Default 0.1.
+    /// Wall thickness (m), below half the corridor's width. Default 0.1.
     pub wall_thickness: f64,
-    /// Distance along the corridor between zigzag turning points (m). Default 3.
+    /// Distance along the corridor between zigzag turning points (m), at least
+    /// [`MIN_ZIGZAG_PERIOD`](super::MIN_ZIGZAG_PERIOD). Default 3.
     pub zigzag_period: f64,
     /// Sideways offset of the zigzag turning points from the corridor centre (m). Default 0.5.
     pub zigzag_amplitude: f64,
