@@ -77,10 +77,10 @@ pub enum Layout {
 /// Arguments of `qicp bench index`.
 #[derive(Debug, Clone, Args)]
 pub struct IndexArgs {
-    /// Points in each index.
+    /// Points in each index (at most 50,000,000).
     #[arg(long, default_value_t = 100_000)]
     pub points: usize,
-    /// Nearest-neighbour queries timed per repetition.
+    /// Nearest-neighbour queries timed per repetition (at most 50,000,000).
     #[arg(long, default_value_t = 100_000)]
     pub queries: usize,
     /// Seed of the point stream.
@@ -92,7 +92,7 @@ pub struct IndexArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Timed repetitions (the median is reported), after one untimed warm-up.
+    /// Timed repetitions (the median is reported), after one untimed warm-up (at most 1,000).
     #[arg(long, default_value_t = 5)]
     pub reps: usize,
 }
@@ -322,11 +322,25 @@ fn one_rep<I: SpatialIndex + Default>(w: &Workload, s: &mut Samples) -> Result<(
     Ok(())
 }
 
+/// Most points (and queries) `qicp bench index` takes: 50 million points are 800 MB.
+pub const MAX_BENCH_POINTS: usize = 50_000_000;
+/// Most timed repetitions of `qicp bench index`.
+pub const MAX_BENCH_REPS: usize = 1_000;
+
 /// Runs `qicp bench index` and returns its report.
 pub fn index_bench(a: &IndexArgs) -> Result<IndexReport> {
-    ensure!(a.points > 0, "--points must be at least 1");
-    ensure!(a.queries > 0, "--queries must be at least 1");
-    ensure!(a.reps > 0, "--reps must be at least 1");
+    ensure!(
+        (1..=MAX_BENCH_POINTS).contains(&a.points),
+        "--points must be 1 to {MAX_BENCH_POINTS}"
+    );
+    ensure!(
+        (1..=MAX_BENCH_POINTS).contains(&a.queries),
+        "--queries must be 1 to {MAX_BENCH_POINTS}"
+    );
+    ensure!(
+        (1..=MAX_BENCH_REPS).contains(&a.reps),
+        "--reps must be 1 to {MAX_BENCH_REPS}"
+    );
     let w = Workload::new(a);
     let with_brute = a.points <= BRUTE_MAX_POINTS;
 

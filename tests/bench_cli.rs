@@ -133,3 +133,28 @@ fn bench_bridge_sizes_refuses_a_bad_size_and_beams() {
         assert_eq!(out.status.code(), Some(2), "{args:?} accepted");
     }
 }
+
+/// `--points 18446744073709551615` used to wrap the workload's size and panic (`mid > len`):
+/// counts beyond the documented bounds are refused with an error, not a crash.
+#[test]
+fn bench_index_refuses_counts_that_overflowed_the_workload() {
+    for args in [
+        &["--points", "18446744073709551615"][..],
+        &["--points", "50000001"],
+        &["--queries", "18446744073709551615"],
+        &["--reps", "1001"],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_qicp"))
+            .args(["bench", "index"])
+            .args(args)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .expect("the qicp binary runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(&args[0][2..]) && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+    }
+}

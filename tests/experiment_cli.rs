@@ -259,6 +259,20 @@ fn bad_experiment_configs_name_the_key() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--worlds 18446744073709551615` used to overflow a capacity and panic.
+#[test]
+fn worlds_beyond_the_bound_are_refused_not_a_crash() {
+    let config = repo().join("tests/fixtures/park_short.toml");
+    let out = out_dir("worlds-bound");
+    for n in ["18446744073709551615", "10001"] {
+        let o = qicp_run(&config, &out, &["--max-scans", "2", "--worlds", n]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{n}: {stderr}");
+        assert!(stderr.contains("at most 10000 worlds"), "{stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 #[test]
 fn worlds_repeats_the_experiment_on_other_layouts_and_reports_medians() {
     let config = repo().join("tests/fixtures/park_short.toml");

@@ -107,7 +107,7 @@ pub struct RunArgs {
     #[cfg_attr(feature = "clap", arg(long))]
     pub max_scans: Option<usize>,
     /// Repeat the experiment on this many simulated worlds (layout and noise seeds from the
-    /// config's upwards) and report medians.
+    /// config's upwards) and report medians; at most 10,000.
     #[cfg_attr(feature = "clap", arg(long, value_name = "N"))]
     pub worlds: Option<usize>,
     /// Matchers run at once, one per thread (default: every core). Results do not depend on

@@ -28,6 +28,9 @@ fn spreads<T>(
 }
 
 /// `qicp run --worlds N`: the experiment on N layouts of the simulated world.
+/// Most worlds one `--worlds` run takes: each is a whole simulated drive and its matchers.
+pub const MAX_WORLDS: usize = 10_000;
+
 pub(super) fn run_worlds(
     args: &RunArgs,
     registry: &Registry,
@@ -42,11 +45,14 @@ pub(super) fn run_worlds(
     if n == 0 {
         anyhow::bail!("--worlds 0: nothing would run");
     }
+    if n > MAX_WORLDS {
+        anyhow::bail!("--worlds {n}: at most {MAX_WORLDS} worlds");
+    }
     let drive = qicp_sim::SimConfig::load(sim)
         .with_context(|| format!("loading drive {}", sim.display()))?;
     let first = config.source.world_seed.unwrap_or(drive.world.seed);
     let first_noise = config.source.seed.unwrap_or(drive.drive.seed);
-    let seeds: Vec<u64> = (0..n as u64).map(|k| first + k).collect();
+    let seeds: Vec<u64> = (0..n as u64).map(|k| first.wrapping_add(k)).collect();
     let mut summaries = Vec::with_capacity(n);
     for (k, &seed) in seeds.iter().enumerate() {
         if !args.quiet {
@@ -54,7 +60,7 @@ pub(super) fn run_worlds(
         }
         let mut c = config.clone();
         c.source.world_seed = Some(seed);
-        c.source.seed = Some(first_noise + k as u64);
+        c.source.seed = Some(first_noise.wrapping_add(k as u64));
         let dir = out.join(format!("world-{seed}"));
         summaries.push(
             run_once(args, registry, &c, &dir, false, Instant::now())
