@@ -5,6 +5,7 @@ use crate::logs::carmen::{CarmenOptions, DEFAULT_MAX_BEAMS, RecordOrder};
 use crate::logs::{LogOptions, LogReader};
 use crate::matching::{BagOutput, progress_spinner};
 use anyhow::{Result, bail};
+use qicp_runner::output::refuse_to_overwrite;
 use std::path::PathBuf;
 
 /// Arguments of `qicp convert`.
@@ -42,6 +43,7 @@ pub fn run(args: ConvertArgs) -> Result<()> {
         },
         ..LogOptions::default()
     };
+    refuse_to_overwrite(&args.log, &[&args.out])?;
     let mut reader = LogReader::open(&args.log, &options)?;
     if matches!(reader, LogReader::Bag(_)) {
         bail!("{} is already a bag (MCAP)", args.log.display());

@@ -8,7 +8,8 @@ use crate::logs::{LogOptions, LogReader};
 use crate::matching::{BagOutput, MatchLoop, RunWriter, progress_spinner};
 use anyhow::{Context, Result, bail};
 use qicp_matchers::MatcherConfig;
-use std::path::PathBuf;
+use qicp_runner::output::refuse_to_overwrite;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `qicp match`.
 #[derive(Debug, clap::Args)]
@@ -182,6 +183,10 @@ pub fn run(args: MatchArgs) -> Result<()> {
         order: args.order.into(),
         ..CarmenOptions::default()
     });
+    let outputs: Vec<_> = RunWriter::FILES.iter().map(|f| out.join(f)).collect();
+    let mut outputs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
+    outputs.extend(args.out_mcap.as_deref());
+    refuse_to_overwrite(log_path, &outputs)?;
     let mut reader = LogReader::open(log_path, &options)?;
     let mut writer = RunWriter::create(out)?;
     let mut bag = args

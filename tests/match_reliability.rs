@@ -478,3 +478,44 @@ fn match_keeps_file_order_unless_told_to_sort_by_time() {
     let o = match_wsm(&log, &dir.path().join("bad"), &["--order", "sideways"]);
     assert!(!o.status.success());
 }
+
+/// `qicp convert LOG LOG` used to replace the log with the bag made from it, and `match
+/// --out-mcap LOG` or a log named `matches.csv` inside `--out` likewise: an output that is
+/// the input (by any path or link) is refused before anything is written.
+#[test]
+fn outputs_that_are_the_input_log_are_refused_and_the_log_survives() {
+    let dir = scratch();
+    let text: String = (0..5).map(|k| flaser(f64::from(k))).collect();
+    let log = file(dir.path(), "in.clf", &text);
+    let link = dir.path().join("link.clf");
+    std::os::unix::fs::symlink(&log, &link).expect("symlink");
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).expect("out dir");
+    let inside = file(&out, "matches.csv", &text);
+    for args in [
+        vec!["convert", s(&log), s(&log)],
+        vec!["convert", s(&log), s(&link)],
+        vec![
+            "match",
+            s(&link),
+            "--matcher",
+            "wsm",
+            "--out",
+            s(&out),
+            "--out-mcap",
+            s(&log),
+        ],
+        vec!["match", s(&inside), "--matcher", "wsm", "--out", s(&out)],
+    ] {
+        let o = qicp(&args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains("refusing to overwrite"),
+            "{}",
+            stderr(&o)
+        );
+    }
+    assert_eq!(std::fs::read_to_string(&log).expect("log"), text);
+    assert_eq!(std::fs::read_to_string(&inside).expect("log"), text);
+    assert!(!out.join("trajectory.tum").exists());
+}

@@ -404,6 +404,14 @@ pub struct RunWriter {
 }
 
 impl RunWriter {
+    /// The files [`RunWriter::commit`] writes into `dir`.
+    pub const FILES: [&'static str; 4] = [
+        "trajectory.tum",
+        "matches.csv",
+        "config.toml",
+        "summary.json",
+    ];
+
     /// Creates `dir` if needed and opens the temporary files in it.
     pub fn create(dir: &Path) -> Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;

@@ -244,6 +244,29 @@ impl Seek for OutputFile {
     }
 }
 
+/// Refuses outputs that are the input file itself (the same file, through any path, link or
+/// hard link): an output is renamed into place when complete, which would replace the log
+/// being read with, say, the bag converted from it.
+pub fn refuse_to_overwrite(input: &Path, outputs: &[&Path]) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(source) = std::fs::metadata(input) else {
+        return Ok(());
+    };
+    for out in outputs {
+        if let Ok(m) = std::fs::metadata(out)
+            && m.dev() == source.dev()
+            && m.ino() == source.ino()
+        {
+            anyhow::bail!(
+                "{} is the input {}: refusing to overwrite it",
+                out.display(),
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Writes a whole file under a temporary name beside `path` and renames it into place.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let mut file = OutputFile::create(path)?;
