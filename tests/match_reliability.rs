@@ -454,7 +454,7 @@ fn trajectory_times(out: &Path) -> Vec<f64> {
 fn match_keeps_file_order_unless_told_to_sort_by_time() {
     let dir = scratch();
     let log = file(
-        &dir.path(),
+        dir.path(),
         "jitter.clf",
         &[1.0, 1.2, 1.6, 1.4, 1.8, 2.0]
             .iter()

@@ -118,3 +118,32 @@ fn bag_keys_are_refused_for_a_simulated_source() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("source.scan_topic"));
 }
+
+/// Stamps at or beyond 2³¹ s used to be clamped into 2147483647 in the bag, exit 0: a stamp a
+/// ROS 2 `builtin_interfaces/Time` cannot hold is refused, and no bag is left.
+#[test]
+fn stamps_a_ros2_time_cannot_hold_are_refused_not_clamped() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let ranges = vec!["2.0"; 181].join(" ");
+    let text: String = (0..5)
+        .map(|k| {
+            let t = 3e9 + 0.2 * f64::from(k);
+            format!("FLASER 181 {ranges} 0 0 0 0 0 0 {t} host {t}\n")
+        })
+        .collect();
+    let log = dir.path().join("late.clf");
+    std::fs::write(&log, text).expect("log");
+    let bag = dir.path().join("late.mcap");
+    let o = qicp(&[
+        "convert",
+        log.to_str().expect("utf-8"),
+        bag.to_str().expect("utf-8"),
+    ]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("3e9") && stderr.contains("ROS 2 stamp"),
+        "{stderr}"
+    );
+    assert!(!bag.exists());
+}

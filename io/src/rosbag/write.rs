@@ -78,6 +78,9 @@ impl BagWriter<std::io::BufWriter<std::fs::File>> {
     }
 }
 
+/// Seconds a ROS 2 stamp (`builtin_interfaces/Time`, int32 seconds) holds at most.
+const MAX_STAMP_S: f64 = 2_147_483_648.0;
+
 impl<W: Write + Seek> BagWriter<W> {
     /// A bag written to `w`; `name` is used in errors.
     pub fn new(w: W, name: &str, layout: BagLayout) -> Result<Self, LogError> {
@@ -141,6 +144,17 @@ impl<W: Write + Seek> BagWriter<W> {
     }
 
     fn put(&mut self, key: &'static str, t: f64, data: &[u8]) -> Result<(), LogError> {
+        // A ROS 2 stamp's seconds are an int32 and an MCAP log time unsigned nanoseconds: a
+        // time outside both would be clamped into a wrong stamp.
+        if !(0.0..MAX_STAMP_S).contains(&t) {
+            return Err(LogError::Bag {
+                path: self.path.clone(),
+                why: format!(
+                    "a record at t = {t:e} s: a ROS 2 stamp holds times in [0, {MAX_STAMP_S}) s (until \
+                     2038-01-19)"
+                ),
+            });
+        }
         let channel_id = self.channel(key)?;
         self.sequence = self.sequence.wrapping_add(1);
         let header = MessageHeader {
