@@ -218,6 +218,9 @@ pub fn run(args: MatchArgs) -> Result<()> {
         return Err(reader.empty(log_path).into());
     }
 
+    if let Some(warning) = matcher.summary().fallback_warning() {
+        eprintln!("warning: {warning}");
+    }
     let mut summary = serde_json::to_value(matcher.summary())?;
     summary["skipped_lines"] = reader.skipped_lines().into();
     summary["late_lines"] = reader.dropped().into();

@@ -519,3 +519,36 @@ fn outputs_that_are_the_input_log_are_refused_and_the_log_survives() {
     assert_eq!(std::fs::read_to_string(&inside).expect("log"), text);
     assert!(!out.join("trajectory.tum").exists());
 }
+
+/// A log whose ranges are all 0 (no returns) used to put every point at the laser, and q-wsm
+/// then held the robot where it started, with a tiny residual and no fallback, while
+/// odometry drove it 0.5 m: now every scan falls back, the trajectory follows odometry, and
+/// the run warns that it is mostly odometry.
+#[test]
+fn zero_ranges_follow_odometry_and_a_run_of_fallbacks_is_warned_about() {
+    let dir = scratch();
+    let zeros = vec!["0"; 181].join(" ");
+    let text: String = (0..6)
+        .map(|k| {
+            let (t, x) = (f64::from(k), 0.1 * f64::from(k));
+            format!("FLASER 181 {zeros} {x} 0 0 {x} 0 0 {t} host {t}\n")
+        })
+        .collect();
+    let log = file(dir.path(), "zeros.clf", &text);
+    let out = dir.path().join("out");
+    let o = qicp(&["match", s(&log), "--matcher", "q-wsm", "--out", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("warning: 6 of 6 scans fell back to odometry"),
+        "{}",
+        stderr(&o)
+    );
+    let last = std::fs::read_to_string(out.join("trajectory.tum")).expect("trajectory");
+    let x: f64 = last
+        .lines()
+        .last()
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse().ok())
+        .expect("a pose");
+    assert!((x - 0.5).abs() < 1e-9, "the robot was held at x = {x}");
+}

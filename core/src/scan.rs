@@ -29,7 +29,7 @@ pub enum BeamStatus {
     Valid,
     /// At or beyond the maximum range: no return.
     MaxRange,
-    /// Below the minimum range (too close to trust).
+    /// Below the minimum range (too close to trust), or exactly 0.
     TooClose,
     /// NaN, infinite or negative.
     Invalid,
@@ -44,7 +44,8 @@ pub struct BeamGeometry {
     pub angle_increment: f64,
     /// Readings at or above this are no-returns (m).
     pub max_range: f64,
-    /// Readings below this are discarded (m).
+    /// Readings below this are discarded (m), and so are readings of exactly 0 (what many
+    /// lasers report for no return; a point at the laser itself has no geometry).
     pub min_range: f64,
 }
 
@@ -102,7 +103,7 @@ impl BeamGeometry {
             BeamStatus::Invalid
         } else if range >= self.max_range {
             BeamStatus::MaxRange
-        } else if range < self.min_range {
+        } else if range < self.min_range || range == 0.0 {
             BeamStatus::TooClose
         } else {
             BeamStatus::Valid
@@ -253,6 +254,17 @@ mod tests {
         // First beam points to −90°: the point lies on −y.
         assert!((s.points()[0] - Point2::new(0.0, -1.0)).norm() < 1e-12);
         assert_eq!(s.status_counts(), [1, 1, 0, 3]);
+    }
+
+    /// A scan of zero ranges used to put every point at the laser itself, and matching those
+    /// points pinned the robot where it stood: a reading of 0 is no return.
+    #[test]
+    fn zero_ranges_are_no_returns_not_points_at_the_laser() {
+        let g = BeamGeometry::centered(4, std::f64::consts::PI, 10.0);
+        let s = Scan::new(1.0, g, vec![0.0, 0.0, 2.0, 0.0]).unwrap();
+        assert_eq!(s.valid_count(), 1);
+        assert_eq!(s.status()[0], BeamStatus::TooClose);
+        assert!(s.points().iter().all(|p| p.coords.norm() > 1.0));
     }
 
     #[test]

@@ -77,6 +77,31 @@ pub struct MatchSummary {
     pub withheld: usize,
 }
 
+impl MatchSummary {
+    /// A warning when most scans fell back to odometry (more than half, of two or more): the
+    /// trajectory is then mostly odometry, which a configuration out of reach of the data (a
+    /// noise model a thousand times off, a correspondence count above the beams) produces
+    /// without any error.
+    #[must_use]
+    pub fn fallback_warning(&self) -> Option<String> {
+        if self.scans < 2 || 2 * self.fallbacks <= self.scans {
+            return None;
+        }
+        let reasons: Vec<String> = self
+            .fallback_reasons
+            .iter()
+            .map(|(why, n)| format!("{why}: {n}"))
+            .collect();
+        Some(format!(
+            "{} of {} scans fell back to odometry ({}): the trajectory is mostly odometry; \
+             check the matcher's configuration against the log",
+            self.fallbacks,
+            self.scans,
+            reasons.join(", ")
+        ))
+    }
+}
+
 /// A matcher's whole run over a drive.
 #[derive(Debug)]
 pub struct MatchRun {

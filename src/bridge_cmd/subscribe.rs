@@ -185,6 +185,9 @@ pub fn run_subscribe(
         rejected,
         poses_published: poses.sent(),
     };
+    if let Some(warning) = matching.summary().fallback_warning() {
+        eprintln!("warning: {warning}");
+    }
     let mut summary = serde_json::to_value(matching.summary())?;
     summary["bridge"] = serde_json::to_value(&bridge)?;
     let text = serde_json::to_string_pretty(&summary)?;
