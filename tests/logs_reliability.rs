@@ -273,3 +273,25 @@ fn truepos_without_laser_lines_is_held_within_the_window() {
         .expect("truepos count in Debug");
     assert!(held <= 52, "{held} truth lines held");
 }
+
+/// A UTF-8 byte-order mark before the first line used to turn its tag into an unknown type,
+/// and the record was lost without a word: the mark is dropped, and records of types qicp
+/// does not read (a misspelt tag among them) are counted where the run's notes list them.
+#[test]
+fn a_byte_order_mark_is_not_part_of_the_first_tag_and_unknown_tags_are_counted() {
+    let text = format!(
+        "\u{feff}{}{}{}",
+        flaser(5, 1.0, 0.0),
+        flaser(5, 2.0, 0.1).replacen("FLASER", "FLASR", 1),
+        flaser(5, 3.0, 0.2)
+    );
+    let log = read(&text, &STRICT).expect("read");
+    assert_eq!(log.records.len(), 2);
+    assert_eq!(log.records[0].timestamp(), 1.0);
+    assert_eq!(log.info.unknown_types.get("FLASR"), Some(&1));
+    assert!(
+        log.info.report().contains("1 FLASR"),
+        "{}",
+        log.info.report()
+    );
+}

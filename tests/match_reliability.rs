@@ -552,3 +552,24 @@ fn zero_ranges_follow_odometry_and_a_run_of_fallbacks_is_warned_about() {
         .expect("a pose");
     assert!((x - 0.5).abs() < 1e-9, "the robot was held at x = {x}");
 }
+
+/// Records of a type qicp does not read (here a misspelt tag) are named in a note, not
+/// dropped unseen.
+#[test]
+fn records_of_unknown_types_are_named_on_stderr() {
+    let dir = scratch();
+    let text = format!(
+        "{}{}{}",
+        flaser(1.0),
+        flaser(2.0).replacen("FLASER", "FLASR", 1),
+        flaser(3.0)
+    );
+    let log = file(dir.path(), "typo.clf", &text);
+    let o = match_wsm(&log, &dir.path().join("out"), &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("of types qicp does not read: 1 FLASR"),
+        "{}",
+        stderr(&o)
+    );
+}

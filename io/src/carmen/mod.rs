@@ -309,6 +309,20 @@ impl LogInfo {
                 DEFAULT_REORDER_WINDOW
             );
         }
+        if !self.unknown_types.is_empty() {
+            // Other CARMEN records (SYNC, NMEAGGA, RAWLASER1…) carry nothing qicp reads; a
+            // misspelt or damaged tag lands here too, so none is dropped unseen.
+            let list: Vec<String> = self
+                .unknown_types
+                .iter()
+                .map(|(k, v)| format!("{v} {k}"))
+                .collect();
+            eprintln!(
+                "note: ignored records of {} of types qicp does not read: {}",
+                path.display(),
+                list.join(", ")
+            );
+        }
     }
 }
 

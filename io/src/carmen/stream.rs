@@ -170,6 +170,12 @@ impl<R: BufRead> CarmenReader<R> {
                 self.skip(err)?;
                 continue;
             };
+            // A byte-order mark some editors put before the first line is not part of its tag.
+            let line = if self.line_no == 1 {
+                line.strip_prefix('\u{feff}').unwrap_or(line)
+            } else {
+                line
+            };
             let mut tokens = line.split_ascii_whitespace();
             let Some(kind) = tokens.next() else { continue };
             if kind.starts_with('#') {
