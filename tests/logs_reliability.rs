@@ -111,6 +111,27 @@ fn robotlaser_angular_resolution_zero_is_refused() {
     assert!(refusal(line).contains("full turn"));
 }
 
+/// `start_angle = 1e308` used to be accepted (adding the beam step to it changes nothing, so
+/// every beam pointed one way), and so were a fov of 0 or −1.
+#[test]
+fn robotlaser_start_angle_beyond_a_turn_and_a_fov_outside_0_to_2pi_are_refused() {
+    let line = |start: &str, fov: &str| {
+        format!(
+            "ROBOTLASER1 0 {start} {fov} 0.01 80 0.01 0 3 1 1 1 0 \
+             0 0 0 0 0 0 0 0 0 0 0 5.0 host 5.0\n"
+        )
+    };
+    for start in ["1e308", "-7.0"] {
+        let why = refusal(&line(start, "3.0"));
+        assert!(why.contains("start_angle"), "{why}");
+    }
+    for fov in ["0", "-1", "7.0"] {
+        let why = refusal(&line("-1.5", fov));
+        assert!(why.contains("fov"), "{why}");
+    }
+    read(&line("-1.5", "3.0"), &STRICT).expect("a sane line reads");
+}
+
 #[test]
 fn poses_beyond_the_map_coordinate_limit_are_refused() {
     let why = refusal(&flaser(3, 1.0, 3e9));

@@ -179,7 +179,17 @@ pub(super) fn parse_robotlaser1(
     let mut f = Fields::new(fields, max_beams);
     f.token("laser_type")?;
     let angle_min = f.finite("start_angle")?;
-    f.finite("fov")?;
+    if angle_min.abs() > std::f64::consts::TAU + 1e-9 {
+        return Err(format!(
+            "`start_angle` is {angle_min} rad: a bearing lies within ±2π"
+        ));
+    }
+    // The bearings come from start_angle and angular_res (interleaved scans keep one fov for
+    // two layouts); a fov outside (0, 2π] is a broken line all the same.
+    let fov = f.finite("fov")?;
+    if !(fov > 0.0 && fov <= std::f64::consts::TAU + 1e-9) {
+        return Err(format!("`fov` is {fov} rad: needs 0 < fov ≤ 2π"));
+    }
     let angle_increment = f.finite("angular_res")?;
     if angle_increment == 0.0 {
         return Err("`angular_res` is 0: the beams would all point one way".into());
