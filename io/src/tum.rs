@@ -5,6 +5,7 @@
 
 use super::{LogError, read_rows8};
 use qicp_core::Pose2;
+use qicp_core::index::MAX_COORDINATE;
 use std::io::{BufRead, Write};
 use std::path::Path;
 
@@ -41,9 +42,22 @@ pub fn read_tum_from<R: BufRead + ?Sized>(
     let mut poses = Vec::new();
     read_rows8(reader, name, "timestamp x y z qx qy qz qw", |line_no, v| {
         let [t, x, y, _z, qx, qy, qz, qw] = v;
-        if qx * qx + qy * qy + qz * qz + qw * qw < 1e-12 {
+        if x.abs() > MAX_COORDINATE || y.abs() > MAX_COORDINATE {
+            return Err(LogError::malformed(
+                name,
+                line_no,
+                format!("position ({x}, {y}) lies beyond ±{MAX_COORDINATE} m"),
+            ));
+        }
+        // A rotation's quaternion at any scale: scaled to unit length first (by its largest
+        // component, so that 1e200 does not overflow the norm into infinity).
+        let m = qx.abs().max(qy.abs()).max(qz.abs()).max(qw.abs());
+        if m < 1e-6 {
             return Err(LogError::malformed(name, line_no, "zero quaternion"));
         }
+        let [qx, qy, qz, qw] = [qx / m, qy / m, qz / m, qw / m];
+        let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+        let [qx, qy, qz, qw] = [qx / norm, qy / norm, qz / norm, qw / norm];
         // Yaw of the quaternion (z-y-x Euler angles); for a planar pose 2·atan2(qz, qw).
         let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
         poses.push((t, Pose2::new(x, y, yaw)));
@@ -56,6 +70,20 @@ pub fn read_tum_from<R: BufRead + ?Sized>(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    /// A quaternion of components near 1e200 used to overflow into a NaN heading, and a
+    /// position of 1e308 gave an RPE of 3e291 against itself.
+    #[test]
+    fn quaternions_at_any_scale_give_their_heading_and_far_positions_are_refused() {
+        let read = |text: &str| read_tum_from(&mut text.as_bytes(), "t.tum");
+        let poses = read("1 0 0 0 0 0 1e200 1e200\n2 0 0 0 0 0 3e-3 0\n").unwrap();
+        assert!((poses[0].1.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert!((poses[1].1.theta.abs() - std::f64::consts::PI).abs() < 1e-12);
+        let why = read("1 1e308 1e308 0 0 0 0 1\n").unwrap_err().to_string();
+        assert!(why.contains("t.tum:1") && why.contains("beyond"), "{why}");
+        let why = read("1 0 0 0 0 0 1e-7 0\n").unwrap_err().to_string();
+        assert!(why.contains("zero quaternion"), "{why}");
+    }
 
     #[test]
     fn round_trips_in_full_precision() {
