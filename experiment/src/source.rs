@@ -222,7 +222,19 @@ impl Scores {
         let ate = match &source.truth {
             Some(truth) => {
                 let traj = whole.context("the whole trajectory is needed for ATE")?;
-                Some(evaluate_ate(traj, truth, &AteOptions::default())?)
+                let opts = AteOptions::default();
+                let report = evaluate_ate(traj, truth, &opts)?;
+                if 2 * report.n < traj.len() {
+                    // A ground truth of a few poses scores a few poses: 0 m from one pair.
+                    eprintln!(
+                        "warning: only {} of the trajectory's {} poses have a ground-truth pose \
+                         within {} s: the ATE covers those alone",
+                        report.n,
+                        traj.len(),
+                        opts.max_dt
+                    );
+                }
+                Some(report)
             }
             None => None,
         };
