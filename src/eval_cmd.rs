@@ -58,6 +58,9 @@ pub fn run(c: EvalCommand) -> Result<()> {
         EvalCommand::Relations(a) => {
             let traj = load_trajectory(&a.traj, LogPoses::Odometry)?;
             let rels = read_relations(&a.relations)?;
+            if rels.is_empty() {
+                anyhow::bail!("{} holds no relations", a.relations.display());
+            }
             let r = evaluate_relations(&traj, &rels, a.max_dt)
                 .with_context(|| format!("scoring {}", a.traj.display()))?;
             if a.json {

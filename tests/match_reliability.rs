@@ -573,3 +573,40 @@ fn records_of_unknown_types_are_named_on_stderr() {
         stderr(&o)
     );
 }
+
+/// `eval ate` used to answer "no pose pairs within 0.1 s: do the trajectories share a time
+/// base?" for an empty TUM file, a truth log without TRUEPOS, and a TUM file opening with a
+/// byte-order mark (read as a CARMEN log); `eval relations` with an empty relations file
+/// asked whether it was the trajectory's. Each now says what is wrong.
+#[test]
+fn eval_names_what_a_trajectory_or_relations_file_lacks() {
+    let dir = scratch();
+    let poses = "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 2 0 0 0 0 0 1\n";
+    let traj = file(dir.path(), "t.tum", poses);
+    let bom = file(dir.path(), "bom.tum", &format!("\u{feff}{poses}"));
+    let empty = file(dir.path(), "empty.tum", "# no poses\n");
+    let log = file(
+        dir.path(),
+        "no-truth.clf",
+        &format!("{}{}", flaser(1.0), flaser(2.0)),
+    );
+    let no_relations = file(dir.path(), "empty.relations", "\n");
+    for (args, expected) in [
+        (vec!["eval", "ate", s(&traj), s(&empty)], "holds no poses"),
+        (vec!["eval", "ate", s(&empty), s(&traj)], "holds no poses"),
+        (vec!["eval", "ate", s(&traj), s(&log)], "no TRUEPOS record"),
+        (
+            vec!["eval", "relations", s(&traj), s(&no_relations)],
+            "holds no relations",
+        ),
+    ] {
+        let o = qicp(&args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(expected), "{args:?}: {}", stderr(&o));
+    }
+    let o = qicp(&["eval", "ate", s(&bom), s(&traj), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert_eq!(v["n"], 3);
+    assert_eq!(v["ate_rmse_m"], 0.0);
+}

@@ -2,7 +2,7 @@
 
 use qicp_io::carmen::{CarmenOptions, read_carmen};
 use qicp_io::tum::{Stamped, read_tum};
-use qicp_io::{LogError, next_line, open_text, parse_f64};
+use qicp_io::{LogError, next_line, open_text, parse_f64, without_bom};
 use std::path::Path;
 
 /// Which poses of a CARMEN log stand for its trajectory.
@@ -17,15 +17,37 @@ pub enum LogPoses {
 /// Reads a trajectory from a TUM file or a CARMEN log (plain or bzip2), told apart by their
 /// first record: a number opens a TUM line, a word a CARMEN record. From a CARMEN log it takes
 /// the laser records' poses named by `poses`.
+/// A file that yields no pose is an error naming what it lacks.
 pub fn load_trajectory(path: &Path, poses: LogPoses) -> Result<Vec<Stamped>, LogError> {
+    let no_poses = |why: String| LogError::NoPoses {
+        path: path.display().to_string(),
+        why,
+    };
     if is_tum(path)? {
-        return read_tum(path);
+        let trajectory = read_tum(path)?;
+        if trajectory.is_empty() {
+            return Err(no_poses(
+                "holds no poses (TUM: timestamp x y z qx qy qz qw)".into(),
+            ));
+        }
+        return Ok(trajectory);
     }
     let log = read_carmen(path, &CarmenOptions::default())?;
-    Ok(match poses {
+    let trajectory = match poses {
         LogPoses::Odometry => log.laser_odometry(),
         LogPoses::Truth => log.laser_truth(),
-    })
+    };
+    if trajectory.is_empty() {
+        return Err(no_poses(match poses {
+            LogPoses::Odometry => "holds no laser records, so no odometry at them".into(),
+            LogPoses::Truth => format!(
+                "no TRUEPOS record lies at any of its {} laser records: the log has no ground \
+                 truth",
+                log.records.len()
+            ),
+        }));
+    }
+    Ok(trajectory)
 }
 
 fn is_tum(path: &Path) -> Result<bool, LogError> {
@@ -36,6 +58,7 @@ fn is_tum(path: &Path) -> Result<bool, LogError> {
         source: e,
     })? {
         let line = String::from_utf8_lossy(&buf);
+        let line = without_bom(&line);
         let Some(first) = line.split_ascii_whitespace().next() else {
             continue;
         };

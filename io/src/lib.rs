@@ -86,6 +86,15 @@ pub enum LogError {
         /// What is wrong.
         why: String,
     },
+    /// A trajectory file holds no pose of the kind asked for (an empty TUM file, a log
+    /// without `TRUEPOS` read as ground truth).
+    #[error("{path}: {why}")]
+    NoPoses {
+        /// The file.
+        path: String,
+        /// What it lacks.
+        why: String,
+    },
     /// A reader option is not usable (e.g. a negative field of view).
     #[error("option `{name}`: {why}")]
     InvalidOption {
@@ -242,6 +251,13 @@ pub fn next_line<R: BufRead + ?Sized>(reader: &mut R, buf: &mut Vec<u8>) -> std:
     Ok(true)
 }
 
+/// A file's first line without the byte-order mark some editors put before it (it is not
+/// part of the line's first field).
+#[must_use]
+pub fn without_bom(first_line: &str) -> &str {
+    first_line.strip_prefix('\u{feff}').unwrap_or(first_line)
+}
+
 /// Parses a number the way C's `strtod` writes them, accepting `nan`, `-nan` and `inf`.
 /// Reads rows of eight finite numbers, one per line, skipping blank lines and `#` comments,
 /// and hands each to `row` with its 1-based line number. `layout` names the columns in errors
@@ -260,8 +276,13 @@ pub(crate) fn read_rows8<R: BufRead + ?Sized>(
     })? {
         line_no += 1;
         let line = std::str::from_utf8(&buf)
-            .map_err(|_| LogError::malformed(name, line_no, "not UTF-8 text"))?
-            .trim();
+            .map_err(|_| LogError::malformed(name, line_no, "not UTF-8 text"))?;
+        let line = if line_no == 1 {
+            without_bom(line)
+        } else {
+            line
+        }
+        .trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }

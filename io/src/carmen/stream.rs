@@ -170,9 +170,8 @@ impl<R: BufRead> CarmenReader<R> {
                 self.skip(err)?;
                 continue;
             };
-            // A byte-order mark some editors put before the first line is not part of its tag.
             let line = if self.line_no == 1 {
-                line.strip_prefix('\u{feff}').unwrap_or(line)
+                crate::without_bom(line)
             } else {
                 line
             };
