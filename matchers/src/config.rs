@@ -19,7 +19,7 @@
 use crate::correlative::CorrelativeParams;
 use crate::icp::IcpParams;
 use crate::idc::Idc;
-use crate::params::{Param, Range, check_section, parse_section, to_table};
+use crate::params::{Param, Range, check_section, parse_section, to_table, typed_section};
 use crate::pipeline::{MotionModel, Odometry, Pipeline, Relevance};
 use crate::registry::{Assembly, ErasedAlgorithm, IndexEntry, ReferenceEntry, Registry};
 use crate::validation::ValidationParams;
@@ -228,9 +228,11 @@ fn section<T: serde::de::DeserializeOwned + Default>(
 ) -> Result<T, ConfigError> {
     match table.remove(key) {
         None => Ok(T::default()),
-        Some(v) => v.try_into().map_err(|e: toml::de::Error| {
-            ConfigError::Parse(format!("matcher.{key}: {}", e.message().trim()))
-        }),
+        Some(toml::Value::Table(t)) => typed_section(&format!("matcher.{key}"), &t),
+        Some(v) => Err(ConfigError::invalid(
+            &format!("matcher.{key}"),
+            format!("must be a table, not {v}"),
+        )),
     }
 }
 
@@ -361,11 +363,7 @@ impl MatcherConfig {
                 // The algorithm's defaults, overridden key by key.
                 let mut merged = to_table(&algorithm.icp_defaults())?;
                 merged.extend(given);
-                toml::Value::Table(merged)
-                    .try_into()
-                    .map_err(|e: toml::de::Error| {
-                        ConfigError::Parse(format!("matcher.icp: {}", e.message().trim()))
-                    })?
+                typed_section("matcher.icp", &merged)?
             }
             Some(v) => {
                 return Err(ConfigError::invalid(

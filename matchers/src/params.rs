@@ -153,13 +153,33 @@ where
             ));
         }
     }
-    let parsed: P =
-        toml::Value::Table(table.clone())
+    typed_section(section, table)
+}
+
+/// Deserialises `table` as `P` (a struct whose missing fields take their defaults); a value
+/// of the wrong type or out of its type's range is named by its dotted key
+/// `<section>.<key>`: on a failure each key is tried alone, and the first that fails alone is
+/// the one named.
+pub fn typed_section<P: DeserializeOwned>(
+    section: &str,
+    table: &toml::Table,
+) -> Result<P, ConfigError> {
+    let parse = |t: toml::Table| -> Result<P, String> {
+        toml::Value::Table(t)
             .try_into()
-            .map_err(|e: toml::de::Error| {
-                ConfigError::invalid(section, e.message().trim().to_string())
-            })?;
-    Ok(parsed)
+            .map_err(|e: toml::de::Error| e.message().trim().to_string())
+    };
+    parse(table.clone()).map_err(|whole| {
+        table
+            .iter()
+            .find_map(|(key, value)| {
+                let alone = toml::Table::from_iter([(key.clone(), value.clone())]);
+                parse(alone)
+                    .err()
+                    .map(|why| ConfigError::invalid(&format!("{section}.{key}"), why))
+            })
+            .unwrap_or_else(|| ConfigError::invalid(section, whole))
+    })
 }
 
 /// Checks every declared parameter of `params` against its range; the error names the

@@ -452,3 +452,34 @@ fn typed_constructors_and_the_registry_build_the_same_matchers() {
         );
     }
 }
+
+/// A value of the wrong type used to be reported for its whole section (`matcher.icp:
+/// invalid type: string "x", expected u32`): the key at fault is named.
+#[test]
+fn values_of_the_wrong_type_name_their_key() {
+    for (text, key) in [
+        (
+            "[matcher.icp]\nmax_iterations = \"x\"\n",
+            "matcher.icp.max_iterations",
+        ),
+        (
+            "[matcher.relevance]\nwindow_scans = -1\n",
+            "matcher.relevance.window_scans",
+        ),
+        (
+            "[matcher.wsm]\nsigma_slide = \"a\"\n",
+            "matcher.wsm.sigma_slide",
+        ),
+        (
+            "[matcher.laser]\nsigma_range = true\n",
+            "matcher.laser.sigma_range",
+        ),
+        (
+            "[matcher.motion]\nsigma_xy_per_m = [1]\n",
+            "matcher.motion.sigma_xy_per_m",
+        ),
+    ] {
+        let e = err(&format!("[matcher]\nkind = \"q-wsm\"\n{text}"));
+        assert!(e.contains(&format!("`{key}`")), "{key} not named: {e}");
+    }
+}
