@@ -56,11 +56,10 @@ pub fn run(a: SimArgs) -> Result<()> {
     }
     let out = a.out.clone().context("--out is required")?;
     crate::matching::remove_on_signal()?;
-    std::fs::create_dir_all(&out)
-        .with_context(|| format!("creating output directory {}", out.display()))?;
-
     let started = Instant::now();
+    // The world is built (and refused when it cannot be) before the directory is made.
     let mut sim = Simulation::new(cfg.clone())?;
+    let made = crate::matching::CreatedDir::create(&out)?;
     let progress = progress_spinner();
     let mut records = Vec::new();
     for r in sim.by_ref() {
@@ -125,6 +124,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         serde_json::to_writer_pretty(&mut w, &summary)?;
         writeln!(w)
     })?;
+    made.keep();
     println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())
 }
@@ -140,7 +140,8 @@ fn load_drive(path: &Path) -> Result<SimConfig> {
     if !is_experiment {
         return SimConfig::load(path).with_context(|| format!("drive {}", path.display()));
     }
-    let experiment = crate::experiment::ExperimentConfig::load(path, crate::registry())?;
+    let experiment = crate::experiment::ExperimentConfig::load(path, crate::registry())
+        .with_context(|| format!("experiment {}", path.display()))?;
     let Some(sim) = &experiment.source.sim else {
         anyhow::bail!(
             "{}: an experiment whose source is a log, not a drive to simulate",

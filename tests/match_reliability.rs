@@ -135,6 +135,12 @@ fn a_failed_run_leaves_no_partial_output() {
     let o = match_wsm(&log, &out, &[]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("log.clf:21"), "{}", stderr(&o));
+    // The directory the run made is gone too (it used to stay behind, empty)…
+    assert!(!out.exists(), "an empty --out was left behind");
+    // … and one that was there before stays, empty.
+    std::fs::create_dir(&out).expect("out dir");
+    let o = match_wsm(&log, &out, &[]);
+    assert!(!o.status.success());
     let left: Vec<_> = std::fs::read_dir(&out)
         .expect("out dir")
         .map(|e| e.expect("entry").file_name())

@@ -114,6 +114,25 @@ fn sim_refuses_a_bad_config_naming_the_key() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// A park too crowded for its trees used to fail with an error naming no key, after making
+/// an empty output directory.
+#[test]
+fn a_crowded_park_names_its_key_and_leaves_no_directory() {
+    let out = out_dir("crowded");
+    std::fs::create_dir_all(&out).expect("dir");
+    let cfg = out.join("crowded.toml");
+    std::fs::write(&cfg, "[world.park]\ntrees = 5000\n").expect("write");
+    let o = sim(&cfg, &out.join("run"), &[]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("`world.park.trees`"), "{err}");
+    assert!(
+        !out.join("run").exists(),
+        "an empty output directory was left"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 #[test]
 fn sim_takes_an_experiment_config_and_simulates_its_source() {
     let out = out_dir("experiment");

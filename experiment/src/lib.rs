@@ -201,7 +201,8 @@ fn run_matchers(
 pub fn run(args: &RunArgs, registry: &Registry) -> Result<()> {
     qicp_runner::matching::remove_on_signal()?;
     let started = Instant::now();
-    let mut config = ExperimentConfig::load(&args.config, registry)?;
+    let mut config = ExperimentConfig::load(&args.config, registry)
+        .with_context(|| format!("experiment {}", args.config.display()))?;
     if let Some(log) = &args.log {
         config.source.sim = None;
         config.source.seed = None;
@@ -245,14 +246,14 @@ fn run_once(
     pictures: bool,
     started: Instant,
 ) -> Result<ExperimentSummary> {
+    let t = Instant::now();
+    // The source is read (a missing file or bad relations refused) before anything is written.
+    let source = Source::load(&config.source)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write_atomic(
         &out.join("config.toml"),
         config.effective_toml(registry)?.as_bytes(),
     )?;
-
-    let t = Instant::now();
-    let source = Source::load(&config.source)?;
     let odometry_path = out.join("odometry.tum");
     let odometry_scores = match source.odometry() {
         Some(odometry) => {

@@ -9,7 +9,7 @@ use serde::Serialize;
 use std::io::Write;
 use std::path::Path;
 
-pub use crate::output::{OutputFile, remove_on_hangup, remove_on_signal, write_atomic};
+pub use crate::output::{CreatedDir, OutputFile, remove_on_hangup, remove_on_signal, write_atomic};
 use std::time::Instant;
 
 /// Per-scan figures, one row of `matches.csv`.
@@ -426,6 +426,8 @@ pub struct RunWriter {
     dir: std::path::PathBuf,
     trajectory: OutputFile,
     matches: OutputFile,
+    // Last, so that it is dropped after the files have removed their temporaries.
+    made: CreatedDir,
 }
 
 impl RunWriter {
@@ -439,7 +441,7 @@ impl RunWriter {
 
     /// Creates `dir` if needed and opens the temporary files in it.
     pub fn create(dir: &Path) -> Result<Self> {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let made = CreatedDir::create(dir)?;
         let trajectory = OutputFile::create(&dir.join("trajectory.tum"))?;
         let mut matches = OutputFile::create(&dir.join("matches.csv"))?;
         write_rows_header(&mut matches).context("writing matches.csv")?;
@@ -447,6 +449,7 @@ impl RunWriter {
             dir: dir.to_path_buf(),
             trajectory,
             matches,
+            made,
         })
     }
 
@@ -465,6 +468,7 @@ impl RunWriter {
         if let Some(text) = summary {
             write_atomic(&self.dir.join("summary.json"), text.as_bytes())?;
         }
+        self.made.keep();
         Ok(())
     }
 }

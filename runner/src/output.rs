@@ -244,6 +244,41 @@ impl Seek for OutputFile {
     }
 }
 
+/// An output directory made for a run: removed again when dropped before [`keep`](Self::keep)
+/// if this created it and it is still empty, so a run that fails leaves no empty directory
+/// behind. A directory that existed before is never removed.
+#[derive(Debug)]
+pub struct CreatedDir {
+    path: PathBuf,
+    created: bool,
+}
+
+impl CreatedDir {
+    /// Creates `path` (and its parents) if it does not exist.
+    pub fn create(path: &Path) -> Result<Self> {
+        let created = !path.exists();
+        std::fs::create_dir_all(path).with_context(|| format!("creating {}", path.display()))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            created,
+        })
+    }
+
+    /// The run succeeded: the directory stays.
+    pub fn keep(mut self) {
+        self.created = false;
+    }
+}
+
+impl Drop for CreatedDir {
+    fn drop(&mut self) {
+        if self.created {
+            // Fails, as it should, when the directory holds anything.
+            let _ = std::fs::remove_dir(&self.path);
+        }
+    }
+}
+
 /// Refuses outputs that are the input file itself (the same file, through any path, link or
 /// hard link): an output is renamed into place when complete, which would replace the log
 /// being read with, say, the bag converted from it.

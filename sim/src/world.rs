@@ -14,7 +14,7 @@ use thiserror::Error;
 pub enum WorldError {
     /// Procedural placement gave up: the area is too crowded for the requested obstacles.
     #[error(
-        "could only place {placed} of {wanted} {what} clear of the route; lower their number or route_clearance"
+        "`world.park.{what}`: could only place {placed} of {wanted} {what} clear of the route; lower their number or world.park.route_clearance"
     )]
     Crowded {
         /// Which obstacles.
