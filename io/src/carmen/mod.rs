@@ -266,12 +266,7 @@ impl LogInfo {
             );
         }
         if !self.unknown_types.is_empty() {
-            let list: Vec<String> = self
-                .unknown_types
-                .iter()
-                .map(|(k, v)| format!("{v} {k}"))
-                .collect();
-            s += &format!("; skipped unknown record types: {}", list.join(", "));
+            s += &format!("; skipped unknown record types: {}", self.unknown_list());
         }
         if self.skipped_lines > 0 {
             s += &format!("; skipped {} malformed lines", self.skipped_lines);
@@ -282,8 +277,18 @@ impl LogInfo {
         s
     }
 
-    /// Warnings a command prints on stderr: skipped and dropped lines, and a note on lines
-    /// out of time order kept in file order.
+    /// The unknown record types with their counts, e.g. `2 SYNC, 1 RLASER`.
+    fn unknown_list(&self) -> String {
+        let list: Vec<String> = self
+            .unknown_types
+            .iter()
+            .map(|(k, v)| format!("{v} {k}"))
+            .collect();
+        list.join(", ")
+    }
+
+    /// Warnings a command prints on stderr: skipped and dropped lines, and notes on lines
+    /// out of time order kept in file order and on records of types qicp does not read.
     pub fn warn(&self, path: &Path) {
         if self.skipped_lines > 0 {
             eprintln!(
@@ -312,15 +317,10 @@ impl LogInfo {
         if !self.unknown_types.is_empty() {
             // Other CARMEN records (SYNC, NMEAGGA, RAWLASER1…) carry nothing qicp reads; a
             // misspelt or damaged tag lands here too, so none is dropped unseen.
-            let list: Vec<String> = self
-                .unknown_types
-                .iter()
-                .map(|(k, v)| format!("{v} {k}"))
-                .collect();
             eprintln!(
                 "note: ignored records of {} of types qicp does not read: {}",
                 path.display(),
-                list.join(", ")
+                self.unknown_list()
             );
         }
     }
