@@ -218,10 +218,11 @@ pub fn run(args: MatchArgs) -> Result<()> {
         return Err(reader.empty(log_path).into());
     }
 
-    if let Some(warning) = matcher.summary().fallback_warning() {
+    let totals = matcher.summary();
+    if let Some(warning) = totals.fallback_warning() {
         eprintln!("warning: {warning}");
     }
-    let mut summary = serde_json::to_value(matcher.summary())?;
+    let mut summary = serde_json::to_value(&totals)?;
     summary["skipped_lines"] = reader.skipped_lines().into();
     summary["late_lines"] = reader.dropped().into();
     summary["out_of_order_lines"] = reader.out_of_order().into();

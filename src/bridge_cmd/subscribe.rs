@@ -185,10 +185,11 @@ pub fn run_subscribe(
         rejected,
         poses_published: poses.sent(),
     };
-    if let Some(warning) = matching.summary().fallback_warning() {
+    let totals = matching.summary();
+    if let Some(warning) = totals.fallback_warning() {
         eprintln!("warning: {warning}");
     }
-    let mut summary = serde_json::to_value(matching.summary())?;
+    let mut summary = serde_json::to_value(&totals)?;
     summary["bridge"] = serde_json::to_value(&bridge)?;
     let text = serde_json::to_string_pretty(&summary)?;
     if let Some(writer) = writer {
