@@ -63,9 +63,11 @@ pub fn run(c: EvalCommand) -> Result<()> {
             }
             let r = evaluate_relations(&traj, &rels, a.max_dt)
                 .with_context(|| format!("scoring {}", a.traj.display()))?;
+            // The JSON stands whatever it holds (a script reads `n`); a table of nothing
+            // scored would only print NaNs above the error.
             if a.json {
                 println!("{}", serde_json::to_string_pretty(&r)?);
-            } else {
+            } else if r.n > 0 {
                 println!("{}", relations_table(&r));
             }
             if r.n == 0 {

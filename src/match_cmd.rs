@@ -198,8 +198,21 @@ pub fn run(args: MatchArgs) -> Result<()> {
 
     // Scan by scan: memory holds the matcher's map and the reorder window, not the log.
     let bar = progress_spinner(&config.kind());
+    let mut first = true;
     for record in &mut reader {
         let record = record?;
+        if let (Some(probe), Some(path), true) = (&probe, &args.relations, first) {
+            // Relations of another log are told before the log is matched, not after.
+            if probe.all_before(record.timestamp()) {
+                bail!(
+                    "every relation of {} lies before the log's first scan ({:.3} s): is it \
+                     the log's relations file?",
+                    path.display(),
+                    record.timestamp()
+                );
+            }
+        }
+        first = false;
         let (estimate, row) = matcher.push(&record);
         writer.push(record.timestamp(), &estimate.pose, &row)?;
         if let Some(bag) = &mut bag {

@@ -431,3 +431,44 @@ fn a_ground_truth_covering_few_poses_is_warned_about() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_run_that_fails_after_reading_its_source_writes_no_summary() {
+    let dir = out_dir("fails-late");
+    let sim = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .arg("sim")
+        .arg(repo().join("configs/worlds/corridor.toml"))
+        .arg("--out")
+        .arg(&dir)
+        .args(["--max-scans", "20"])
+        .output()
+        .expect("runs qicp sim");
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let config = dir.join("experiment.toml");
+    std::fs::write(
+        &config,
+        "[source]\nlog = \"sim.log\"\n[run]\nmatchers = [\"wsm\"]\n",
+    )
+    .expect("config");
+    // A directory where the odometry's trajectory goes: its write fails after the source is
+    // read and config.toml is written.
+    let out = dir.join("out");
+    std::fs::create_dir_all(out.join("odometry.tum").join("blocker")).expect("blocker");
+    let o = qicp_run(&config, &out, &["--quiet"]);
+    assert!(!o.status.success(), "a failed write, yet exit 0");
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("odometry.tum"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(out.join("config.toml").exists(), "the completed file stays");
+    assert!(
+        !out.join("summary.json").exists(),
+        "a summary marks a complete run"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

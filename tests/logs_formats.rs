@@ -339,6 +339,30 @@ fn bzip2_logs_are_recognised_by_content_and_streamed() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+#[test]
+fn a_truncated_bzip2_log_is_refused_not_read_as_a_short_log() {
+    let dir = scratch("bz2-cut");
+    let mut enc = BzEncoder::new(Vec::new(), Compression::best());
+    enc.write_all(EVERY_TYPE.as_bytes()).unwrap();
+    let bytes = enc.finish().unwrap();
+    // Cut anywhere after the header: inside the block, inside the end-of-stream marker, or
+    // one byte short of the whole stream.
+    for cut in [10, bytes.len() / 2, bytes.len() - 10, bytes.len() - 1] {
+        let path = dir.join(format!("cut{cut}.clf.bz2"));
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        for lenient in [false, true] {
+            let opts = CarmenOptions {
+                lenient,
+                ..CarmenOptions::default()
+            };
+            let err = read_carmen(&path, &opts).unwrap_err();
+            let text = err.to_string();
+            assert!(text.contains(&format!("cut{cut}.clf.bz2")), "{text}");
+            assert!(text.contains("EOF"), "cut {cut}, lenient {lenient}: {text}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
 /// Records of a simulated drive: 181 beams over 180°, some NaN and max-range readings.
 fn drive(n: usize, geometry: BeamGeometry, offset: Pose2) -> Vec<Record> {
     (0..n)

@@ -166,6 +166,31 @@ fn relations_outside_the_log_are_an_error() {
 }
 
 #[test]
+fn relations_that_all_lie_before_the_log_are_refused_before_matching() {
+    let dir = scratch();
+    let mut text = String::new();
+    for i in 0..20 {
+        text += &flaser(1000.0 + f64::from(i) * 0.1);
+    }
+    let log = file(dir.path(), "log.clf", &text);
+    let relations = file(
+        dir.path(),
+        "early.relations",
+        "10 11 0.1 0 0 0 0 0\n12 13 0.1 0 0 0 0 0\n",
+    );
+    let out = dir.path().join("out");
+    let o = match_wsm(&log, &out, &["--relations", s(&relations)]);
+    assert!(!o.status.success(), "relations of another log, yet exit 0");
+    let err = stderr(&o);
+    assert!(
+        err.contains("early.relations") && err.contains("before"),
+        "{err}"
+    );
+    // Nothing was matched, so nothing is written.
+    assert!(!out.exists(), "outputs written for an unscorable run");
+}
+
+#[test]
 fn iteration_counts_without_an_upper_bound_are_refused() {
     let dir = scratch();
     let config = file(
@@ -221,6 +246,14 @@ fn eval_relations_with_none_inside_the_trajectory_is_an_error() {
     // The figures still go to stdout, with n = 0 for all to see.
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
     assert_eq!(v["n"], 0);
+    // The table form prints no table of NaNs above the error.
+    let o = qicp(&["eval", "relations", s(&traj), s(&relations)]);
+    assert!(!o.status.success(), "n = 0 yet exit 0");
+    assert!(
+        o.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
 }
 
 #[test]

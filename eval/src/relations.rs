@@ -152,6 +152,13 @@ impl RelationProbe {
         Ok(())
     }
 
+    /// Whether every relation time lies more than the probe's `max_dt` before `t`: a
+    /// trajectory that starts at `t` can score none of them (relations of another log).
+    #[must_use]
+    pub fn all_before(&self, t: f64) -> bool {
+        self.times.last().is_none_or(|&last| last < t - self.max_dt)
+    }
+
     /// The poses picked, in time order.
     #[must_use]
     pub fn trajectory(&self) -> Vec<Stamped> {

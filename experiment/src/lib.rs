@@ -39,6 +39,10 @@
 //!   again as is);
 //! - `map_<kind>.png`, `trajectories.png`, `residual.png`, `certainty.png`.
 //!
+//! `summary.json` is written last and marks a complete run: one that fails after its source
+//! was read keeps the files it completed (each written whole, under a temporary name first)
+//! and has no `summary.json`.
+//!
 //! With `--worlds N` (a `sim` source) the experiment runs on N worlds: layout seeds
 //! `world_seed`, `world_seed + 1`, … and noise seeds `seed`, `seed + 1`, … (defaults: the drive
 //! config's), each in `DIR/world-<layout seed>/` without pictures; `DIR/worlds.json` and the
