@@ -649,3 +649,15 @@ fn eval_names_what_a_trajectory_or_relations_file_lacks() {
     assert_eq!(v["n"], 3);
     assert_eq!(v["ate_rmse_m"], 0.0);
 }
+
+#[test]
+fn the_cause_of_an_unreadable_log_is_printed_once() {
+    let dir = scratch();
+    let missing = dir.path().join("absent.clf");
+    let o = match_wsm(&missing, &dir.path().join("out"), &[]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    // The error's message held its cause and its chain held it again: printed twice.
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+    assert!(err.contains("absent.clf"), "{err}");
+}

@@ -177,7 +177,7 @@ pub enum ReceiveError {
     /// A scan arrived but cannot become a record (a pose that is not finite or off the map,
     /// a bad beam geometry): yielded by [`Records`](crate::Records), which goes on with the
     /// next scan.
-    #[error("scan {seq} of publisher {publisher:#x} on {service:?} rejected: {source}")]
+    #[error("scan {seq} of publisher {publisher:#x} on {service:?} rejected: {why}")]
     Rejected {
         /// The service.
         service: String,
@@ -185,8 +185,8 @@ pub enum ReceiveError {
         seq: u64,
         /// The scan's publisher ([`ScanHeader::publisher`](crate::ScanHeader::publisher)).
         publisher: u64,
-        /// Why it is not a record.
-        source: qicp_core::ScanError,
+        /// Why it is not a record (part of the message, not a separate `source()`).
+        why: qicp_core::ScanError,
     },
 }
 

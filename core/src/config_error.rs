@@ -8,12 +8,13 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum ConfigError {
     /// The file cannot be read.
-    #[error("reading {path}: {source}")]
+    #[error("reading {path}: {cause}")]
     Io {
         /// The file.
         path: String,
-        /// Why.
-        source: std::io::Error,
+        /// Why (part of the message, not a separate `source()`: a printed chain of causes
+        /// shows it once).
+        cause: std::io::Error,
     },
     /// The TOML does not parse or does not fit the schema (unknown key, wrong type…); the
     /// message names the key and shows the offending line where the parser gives them.
@@ -36,12 +37,12 @@ pub enum ConfigError {
         kind: String,
     },
     /// A table inside the file is wrong, e.g. an experiment's `[matchers.q-wsm]`.
-    #[error("`{key}`: {source}")]
+    #[error("`{key}`: {inner}")]
     In {
         /// Dotted path of the table.
         key: String,
-        /// What is wrong inside it.
-        source: Box<ConfigError>,
+        /// What is wrong inside it (part of the message, as for `Io`).
+        inner: Box<ConfigError>,
     },
 }
 
@@ -59,7 +60,7 @@ impl ConfigError {
     pub fn inside(self, key: impl Into<String>) -> Self {
         Self::In {
             key: key.into(),
-            source: Box::new(self),
+            inner: Box::new(self),
         }
     }
 
@@ -68,7 +69,7 @@ impl ConfigError {
     pub fn key(&self) -> Option<&str> {
         match self {
             Self::Invalid { key, .. } | Self::Unused { key, .. } => Some(key),
-            Self::In { source, .. } => source.key(),
+            Self::In { inner, .. } => inner.key(),
             Self::Io { .. } | Self::Parse(_) => None,
         }
     }

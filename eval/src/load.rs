@@ -55,7 +55,7 @@ fn is_tum(path: &Path) -> Result<bool, LogError> {
     let mut buf = Vec::new();
     while next_line(&mut reader, &mut buf).map_err(|e| LogError::Io {
         path: path.display().to_string(),
-        source: e,
+        cause: e,
     })? {
         let line = String::from_utf8_lossy(&buf);
         let line = without_bom(&line);

@@ -183,7 +183,7 @@ impl ExperimentConfig {
     pub fn load(path: &Path, registry: &Registry) -> Result<Self, ExperimentError> {
         let text = std::fs::read_to_string(path).map_err(|e| ExperimentError::Io {
             path: path.display().to_string(),
-            source: e,
+            cause: e,
         })?;
         let mut c = Self::from_toml(&text, registry).map_err(|e| match e {
             ExperimentError::Parse(m) => ExperimentError::Parse(format!("{}: {m}", path.display())),

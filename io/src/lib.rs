@@ -53,12 +53,13 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum LogError {
     /// The file could not be opened or read.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file.
         path: String,
-        /// The cause.
-        source: std::io::Error,
+        /// The cause: part of the message, not a separate `source()`, so that it is printed
+        /// once where a chain of causes is printed.
+        cause: std::io::Error,
     },
     /// A line is malformed.
     #[error("{path}:{line}: {why}")]
@@ -106,10 +107,10 @@ pub enum LogError {
 }
 
 impl LogError {
-    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+    pub(crate) fn io(path: &Path, cause: std::io::Error) -> Self {
         LogError::Io {
             path: path.display().to_string(),
-            source,
+            cause,
         }
     }
 
@@ -272,7 +273,7 @@ pub(crate) fn read_rows8<R: BufRead + ?Sized>(
     let mut line_no = 0;
     while next_line(reader, &mut buf).map_err(|e| LogError::Io {
         path: name.to_string(),
-        source: e,
+        cause: e,
     })? {
         line_no += 1;
         let line = std::str::from_utf8(&buf)

@@ -33,7 +33,7 @@ pub enum SimError {
     #[error(transparent)]
     World(#[from] WorldError),
     /// A scan could not be built (a bug: the geometry is validated beforehand).
-    #[error("scan: {0}")]
+    #[error("building a scan")]
     Scan(#[from] ScanError),
 }
 

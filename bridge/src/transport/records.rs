@@ -139,13 +139,13 @@ impl Iterator for Records<'_> {
             }
             if let Some((header, record)) = scan.take() {
                 self.last_header = Some(header);
-                return Some(record.map_err(|source| {
+                return Some(record.map_err(|why| {
                     self.rejected += 1;
                     ReceiveError::Rejected {
                         service: subscriber.name.clone(),
                         seq: header.seq,
                         publisher: header.publisher,
-                        source,
+                        why,
                     }
                 }));
             }

@@ -149,7 +149,7 @@ impl<R: BufRead> CarmenReader<R> {
         loop {
             let more = next_line(&mut self.reader, &mut self.buf).map_err(|e| LogError::Io {
                 path: self.name.clone(),
-                source: e,
+                cause: e,
             })?;
             if !more {
                 return Ok(false);
