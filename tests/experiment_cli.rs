@@ -397,15 +397,14 @@ fn concurrent_matchers_give_the_sequential_results() {
 
 /// A ground truth of one pose on a 40-scan log used to score ATE 0.000 m for every matcher,
 /// without a word: a truth that pairs with fewer than half of the poses is warned about.
-#[test]
-fn a_ground_truth_covering_few_poses_is_warned_about() {
-    let dir = out_dir("sparse-truth");
+/// `qicp sim` of the corridor world into `dir`: `sim.log` and `groundtruth.tum`, `scans` long.
+fn simulate_corridor(dir: &Path, scans: usize) {
     let sim = Command::new(env!("CARGO_BIN_EXE_qicp"))
         .arg("sim")
         .arg(repo().join("configs/worlds/corridor.toml"))
         .arg("--out")
-        .arg(&dir)
-        .args(["--max-scans", "40"])
+        .arg(dir)
+        .args(["--max-scans", &scans.to_string()])
         .output()
         .expect("runs qicp sim");
     assert!(
@@ -413,6 +412,12 @@ fn a_ground_truth_covering_few_poses_is_warned_about() {
         "{}",
         String::from_utf8_lossy(&sim.stderr)
     );
+}
+
+#[test]
+fn a_ground_truth_covering_few_poses_is_warned_about() {
+    let dir = out_dir("sparse-truth");
+    simulate_corridor(&dir, 40);
     let truth = std::fs::read_to_string(dir.join("groundtruth.tum")).expect("truth");
     let first = truth.lines().find(|l| !l.starts_with('#')).expect("a pose");
     std::fs::write(dir.join("one.tum"), format!("{first}\n")).expect("one pose");
@@ -435,19 +440,7 @@ fn a_ground_truth_covering_few_poses_is_warned_about() {
 #[test]
 fn a_run_that_fails_after_reading_its_source_writes_no_summary() {
     let dir = out_dir("fails-late");
-    let sim = Command::new(env!("CARGO_BIN_EXE_qicp"))
-        .arg("sim")
-        .arg(repo().join("configs/worlds/corridor.toml"))
-        .arg("--out")
-        .arg(&dir)
-        .args(["--max-scans", "20"])
-        .output()
-        .expect("runs qicp sim");
-    assert!(
-        sim.status.success(),
-        "{}",
-        String::from_utf8_lossy(&sim.stderr)
-    );
+    simulate_corridor(&dir, 20);
     let config = dir.join("experiment.toml");
     std::fs::write(
         &config,
