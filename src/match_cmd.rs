@@ -201,18 +201,18 @@ pub fn run(args: MatchArgs) -> Result<()> {
     let mut first = true;
     for record in &mut reader {
         let record = record?;
-        if let (Some(probe), Some(path), true) = (&probe, &args.relations, first) {
-            // Relations of another log are told before the log is matched, not after.
-            if probe.all_before(record.timestamp()) {
-                bail!(
-                    "every relation of {} lies before the log's first scan ({:.3} s): is it \
-                     the log's relations file?",
-                    path.display(),
-                    record.timestamp()
-                );
-            }
+        // Relations of another, earlier log are told at the first scan, not after matching.
+        if std::mem::take(&mut first)
+            && let (Some(probe), Some(path)) = (&probe, &args.relations)
+            && probe.all_before(record.timestamp())
+        {
+            bail!(
+                "every relation of {} lies before the log's first scan ({:.3} s): is it the \
+                 log's relations file?",
+                path.display(),
+                record.timestamp()
+            );
         }
-        first = false;
         let (estimate, row) = matcher.push(&record);
         writer.push(record.timestamp(), &estimate.pose, &row)?;
         if let Some(bag) = &mut bag {
