@@ -465,3 +465,33 @@ fn a_run_that_fails_after_reading_its_source_writes_no_summary() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn relations_of_another_log_stop_a_run_before_its_matchers() {
+    let dir = out_dir("foreign-relations");
+    simulate_corridor(&dir, 20);
+    // The simulated drive starts near t = 0; these relations lie a day later.
+    std::fs::write(
+        dir.join("far.relations"),
+        "86400 86401 0.1 0 0 0 0 0\n86402 86403 0.1 0 0 0 0 0\n",
+    )
+    .expect("relations");
+    let config = dir.join("experiment.toml");
+    std::fs::write(
+        &config,
+        "[source]\nlog = \"sim.log\"\nrelations = \"far.relations\"\n[run]\nmatchers = [\"wsm\"]\n",
+    )
+    .expect("config");
+    let out = dir.join("out");
+    let o = qicp_run(&config, &out, &["--quiet"]);
+    // It used to warn and score every matcher on nothing, exit 0.
+    assert!(!o.status.success(), "relations of another log, yet exit 0");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("none of the 2 relations"), "{stderr}");
+    assert!(
+        !out.join("wsm").exists(),
+        "a matcher ran on unscorable relations"
+    );
+    assert!(!out.join("summary.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

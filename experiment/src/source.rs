@@ -243,10 +243,12 @@ impl Scores {
                 let traj = near_relations.context("no poses for the relations")?;
                 let r = evaluate_relations(traj, rel, qicp_eval::DEFAULT_MAX_DT)?;
                 if r.n == 0 {
-                    eprintln!(
-                        "warning: none of the {} relations falls on this log's times: \
-                         are they the log's?",
-                        rel.len()
+                    // Odometry is scored first, so this stops a run before its matchers.
+                    anyhow::bail!(
+                        "none of the {} relations has poses within {} s of this log's \
+                         records: are they the log's?",
+                        rel.len(),
+                        qicp_eval::DEFAULT_MAX_DT
                     );
                 }
                 Some(r)
