@@ -58,3 +58,15 @@ fn main() -> Result<()> {
         Command::Sweep(a) => sweep_cmd::run(a),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// Every `conflicts_with`, `requires` and default names an argument that exists.
+    #[test]
+    fn the_command_line_is_consistent() {
+        Cli::command().debug_assert();
+    }
+}

@@ -29,17 +29,18 @@ pub struct MatchArgs {
     #[arg(long, required_unless_present = "subscribe")]
     pub out: Option<PathBuf>,
     /// Skip and count malformed log lines instead of failing.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "subscribe")]
     pub lenient: bool,
     /// Readings a laser line may announce at most; longer lines are malformed.
-    #[arg(long, default_value_t = crate::logs::carmen::DEFAULT_MAX_BEAMS)]
+    #[arg(long, default_value_t = crate::logs::carmen::DEFAULT_MAX_BEAMS, conflicts_with = "subscribe")]
     pub max_beams: usize,
     /// The order of a CARMEN log's records: as the file gives them (the order the laser took
     /// them), or sorted by timestamp (as `qicp convert` writes a bag).
-    #[arg(long, value_enum, default_value_t = LogOrder::File)]
+    #[arg(long, value_enum, default_value_t = LogOrder::File, conflicts_with = "subscribe")]
     pub order: LogOrder,
-    /// Freiburg relations file: score the trajectory and add the figures to summary.json.
-    #[arg(long)]
+    /// Freiburg relations file: score the trajectory and add the figures to summary.json
+    /// (not with --subscribe).
+    #[arg(long, conflicts_with = "subscribe")]
     pub relations: Option<PathBuf>,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
@@ -50,7 +51,7 @@ pub struct MatchArgs {
     /// Also write a ROS 2 bag (MCAP): the scans, the odometry and the estimated poses
     /// (`nav_msgs/msg/Odometry` on /qicp/odom and the /tf transform map -> odom), to play in
     /// Foxglove or RViz beside the input.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "subscribe")]
     pub out_mcap: Option<PathBuf>,
     /// Take the scans from the iceoryx2 bridge instead of a log.
     #[command(flatten)]
@@ -82,13 +83,13 @@ impl From<LogOrder> for RecordOrder {
 #[derive(Debug, Clone, clap::Args)]
 pub struct BagArgs {
     /// The `sensor_msgs/msg/LaserScan` topic of a bag.
-    #[arg(long, default_value = "/scan")]
+    #[arg(long, default_value = "/scan", conflicts_with = "subscribe")]
     pub scan_topic: String,
     /// The `nav_msgs/msg/Odometry` topic of a bag.
-    #[arg(long, default_value = "/odom", conflicts_with = "odom_frame")]
+    #[arg(long, default_value = "/odom", conflicts_with_all = ["odom_frame", "subscribe"])]
     pub odom_topic: String,
     /// Take odometry from /tf instead: the transform from this frame to --base-frame.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "subscribe")]
     pub odom_frame: Option<String>,
     /// The robot's frame, with --odom-frame.
     #[arg(long, default_value = "base_link", requires = "odom_frame")]

@@ -661,3 +661,25 @@ fn the_cause_of_an_unreadable_log_is_printed_once() {
     assert_eq!(err.matches("No such file").count(), 1, "{err}");
     assert!(err.contains("absent.clf"), "{err}");
 }
+
+#[test]
+fn log_only_options_are_refused_with_subscribe_not_ignored() {
+    // They were accepted and did nothing: no relations scored, no bag written.
+    for extra in [
+        &["--relations", "r.relations"][..],
+        &["--out-mcap", "out.mcap"],
+        &["--lenient"],
+        &["--order", "time"],
+        &["--odom-frame", "odom"],
+    ] {
+        let mut args = vec!["match", "--subscribe", "--matcher", "wsm"];
+        args.extend_from_slice(extra);
+        let o = qicp(&args);
+        assert!(!o.status.success(), "{extra:?} accepted");
+        assert!(
+            stderr(&o).contains("cannot be used with"),
+            "{extra:?}: {}",
+            stderr(&o)
+        );
+    }
+}
