@@ -144,17 +144,35 @@ fn bench_index_refuses_counts_that_overflowed_the_workload() {
         &["--queries", "18446744073709551615"],
         &["--reps", "1001"],
     ] {
-        let out = Command::new(env!("CARGO_BIN_EXE_qicp"))
-            .args(["bench", "index"])
-            .args(args)
-            .env("RUST_BACKTRACE", "0")
-            .output()
-            .expect("the qicp binary runs");
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
-        assert!(
-            stderr.contains(&args[0][2..]) && !stderr.contains("panicked"),
-            "{stderr}"
-        );
+        assert_count_refused("index", args, 1);
     }
+}
+
+#[test]
+fn bench_bridge_refuses_counts_that_aborted_its_allocation() {
+    // 10¹¹ beams aborted on an 800 GB allocation (exit 134); 0 messages was "empty bench".
+    for args in [
+        &["--beams", "100000000000"][..],
+        &["--beams", "0"],
+        &["--messages", "0"],
+        &["--burst", "10000001"],
+    ] {
+        assert_count_refused("bridge", args, 2);
+    }
+}
+
+/// `qicp bench BENCH ARGS` exits with `code` and names the option `args[0]`, without a panic.
+fn assert_count_refused(bench: &str, args: &[&str], code: i32) {
+    let out = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(["bench", bench])
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("the qicp binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(code), "{args:?}: {stderr}");
+    assert!(
+        stderr.contains(&args[0][2..]) && !stderr.contains("panicked"),
+        "{stderr}"
+    );
 }

@@ -2,19 +2,29 @@
 
 use super::*;
 
+/// Messages a latency or throughput run may ask for.
+const MAX_MESSAGES: u64 = 10_000_000;
+/// Beams a benchmark scan may have (8 MB of ranges): a scan is allocated whole.
+const MAX_BEAMS: u64 = 1_000_000;
+
+/// A count from 1 to `max` on the command line.
+fn count(max: u64) -> clap::builder::RangedU64ValueParser<usize> {
+    clap::builder::RangedU64ValueParser::new().range(1..=max)
+}
+
 /// Arguments of `qicp bench bridge`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct BridgeBenchArgs {
     /// Messages per latency run (each waits for the previous one to arrive); with --sizes, at
     /// most this many, and at most 2 GiB of payload.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, value_parser = count(MAX_MESSAGES))]
     pub messages: usize,
     /// Messages per throughput run (sent back to back); with --sizes, at most this many, and
     /// at most 1 GiB of payload.
-    #[arg(long, default_value_t = 20000)]
+    #[arg(long, default_value_t = 20000, value_parser = count(MAX_MESSAGES))]
     pub burst: usize,
-    /// Beams per scan (scans through the scan service; not with --sizes).
-    #[arg(long, default_value_t = 181)]
+    /// Beams per scan (scans through the scan service; not with --sizes), at most a million.
+    #[arg(long, default_value_t = 181, value_parser = count(MAX_BEAMS))]
     pub beams: usize,
     /// Payload sizes to measure instead of scans, e.g. `2k,64k,1m,4m` (bytes; k = 1024,
     /// m = 1024²): latency, messages/s and CPU time per message of iceoryx2 (written and read
