@@ -24,6 +24,11 @@ pub struct SweepArgs {
     /// per metre or 30°), so the figures are disagreements with the default, not errors.
     #[arg(long)]
     pub relations: Option<PathBuf>,
+    /// Score every run against this trajectory of the log instead (TUM: another matcher's or
+    /// a SLAM system's): relations drawn along it, a segment per metre or 30°, so that a log
+    /// without relations is swept against a trajectory you trust, not against the default.
+    #[arg(long, value_name = "TUM", conflicts_with = "relations")]
+    pub reference: Option<PathBuf>,
     /// Print the report as JSON on stdout (progress stays on stderr).
     #[arg(long)]
     pub json: bool,
@@ -64,9 +69,12 @@ pub fn run(args: SweepArgs) -> Result<()> {
         order: args.order.into(),
         ..crate::logs::carmen::CarmenOptions::default()
     };
-    let mut input = match &args.relations {
-        Some(relations) => SweepInput::load_with(&args.log, relations, args.scans, carmen)?,
-        None => SweepInput::against_default(&args.log, args.scans, carmen)?,
+    let mut input = match (&args.relations, &args.reference) {
+        (Some(relations), _) => SweepInput::load_with(&args.log, relations, args.scans, carmen)?,
+        (None, Some(reference)) => {
+            SweepInput::against_trajectory(&args.log, reference, args.scans, carmen)?
+        }
+        (None, None) => SweepInput::against_default(&args.log, args.scans, carmen)?,
     };
     if let Some(dir) = &args.trajectories {
         input = input.with_trajectories(dir)?;

@@ -370,3 +370,49 @@ fn sweep_without_relations_refuses_a_drive_too_short_to_compare() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(stderr.contains("nothing to compare"), "{stderr}");
 }
+
+#[test]
+fn sweep_against_a_reference_trajectory_scores_the_default_too() {
+    let dir = tempfile::Builder::new()
+        .prefix("qicp-sweep-reference-")
+        .tempdir()
+        .expect("scratch dir");
+    let path = |name: &str| dir.path().join(name).display().to_string();
+    let world = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/worlds/corridor.toml");
+    let o = qicp(&["sim", world, "--out", &path("sim"), "--max-scans", "120"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let log = path("sim/sim.log");
+    // idc's own trajectory as the reference: the default run agrees with it exactly.
+    let o = qicp(&["match", &log, "--matcher", "idc", "--out", &path("idc")]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let reference = path("idc/trajectory.tum");
+    let args = [
+        "sweep",
+        &log,
+        "--matcher",
+        "idc",
+        "--reference",
+        &reference,
+        "--variants",
+        "scans/2,range-noise",
+        "--json",
+    ];
+    let o = qicp(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+    assert_eq!(report["scored_against"], "reference trajectory");
+    let segments = report["relations_total"].as_u64().expect("segments");
+    assert!(segments > 10, "{report}");
+    assert!(f(&report["default"]["trans_mean"]) < 1e-9, "{report}");
+    for v in report["variants"].as_array().expect("variants") {
+        // Segments end on records every variant keeps: scans/2 has them all.
+        assert_eq!(v["relations"].as_u64(), Some(segments), "{v}");
+        assert!(f(&v["trans_mean"]) > 0.0, "{v}");
+    }
+    // A reference and a relations file at once are refused.
+    let mut both = args.to_vec();
+    both.extend(["--relations", &reference]);
+    let o = qicp(&both);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));
+}

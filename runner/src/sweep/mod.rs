@@ -129,6 +129,10 @@ pub enum ScoredAgainst {
     /// Relations drawn along the default run's trajectory ([`SweepInput::against_default`]).
     #[serde(rename = "default run")]
     DefaultRun,
+    /// Relations drawn along a reference trajectory ([`SweepInput::against_trajectory`]):
+    /// disagreements with it, the default's included.
+    #[serde(rename = "reference trajectory")]
+    Reference,
 }
 
 /// A variant is fragile when its mean error exceeds this many times the default's…
@@ -303,6 +307,13 @@ pub fn table(report: &SweepReport) -> String {
             "{} on {} ({} scans, {} relations in file)",
             report.matcher, report.log, report.scans, report.relations_total
         );
+    } else if report.scored_against == ScoredAgainst::Reference {
+        let _ = writeln!(
+            out,
+            "{} on {} ({} scans), scored against the reference trajectory: its motion over {} \
+             segments of {SEGMENT_M} m or 30°; errors are disagreements with it",
+            report.matcher, report.log, report.scans, report.relations_total
+        );
     } else {
         let _ = writeln!(
             out,
@@ -337,7 +348,7 @@ pub fn table(report: &SweepReport) -> String {
             fmt_f(f.ms_per_scan_median, 2),
         )
     };
-    let own = (report.scored_against == ScoredAgainst::Relations).then_some(1.0);
+    let own = (report.scored_against != ScoredAgainst::DefaultRun).then_some(1.0);
     let _ = writeln!(out, "{}", line("default", &report.default, own));
     for v in &report.variants {
         match (&v.figures, &v.error) {
@@ -395,6 +406,9 @@ pub struct SweepInput {
     /// True when the runs are scored against the default run's trajectory rather than against
     /// relations ([`SweepInput::against_default`]).
     pub against_default: bool,
+    /// The trajectory the relations were drawn along, when they were
+    /// ([`SweepInput::against_trajectory`]).
+    pub reference: Option<String>,
     /// Where each run writes its trajectory (see [`SweepInput::with_trajectories`]).
     trajectories: Option<PathBuf>,
 }
@@ -431,6 +445,76 @@ impl SweepInput {
         if relations.is_empty() {
             bail!("{relations_name} holds no relations");
         }
+        Self::with_relations(log, relations, &relations_name, scans, carmen)
+    }
+
+    /// A sweep scored against a reference trajectory of the log (TUM; another matcher's, a
+    /// SLAM system's): relations drawn along its poses nearest the records every variant
+    /// keeps, as [`relations_along`] draws them, a segment per [`SEGMENT_M`] or
+    /// [`SEGMENT_RAD`]. Streams the log once to count its records. For a log without relations whose trusted
+    /// trajectory is not the default run's: every run, the default's too, is scored by how
+    /// far its motion disagrees with the reference's, and the ratios say what each variant
+    /// costs.
+    pub fn against_trajectory(
+        log: &Path,
+        reference: &Path,
+        scans: Option<NonZeroUsize>,
+        carmen: CarmenOptions,
+    ) -> Result<Self> {
+        let name = reference.display().to_string();
+        let mut trajectory = qicp_io::tum::read_tum(reference)
+            .with_context(|| format!("reading the reference trajectory {name}"))?;
+        trajectory.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let options = LogOptions {
+            carmen,
+            ..LogOptions::default()
+        };
+        // Segments end on records every variant keeps (`scans/2` keeps the even ones), as
+        // against the default run: the reference's pose nearest each such record's time.
+        let mut kept = Vec::new();
+        let mut k = 0usize;
+        let (count, span) = count_records(log, &options, scans, |t, _| {
+            if k % 2 == 0
+                && let Some(&pose) = nearest_within(&trajectory, t, MAX_DT)
+                && kept.last() != Some(&pose)
+            {
+                kept.push(pose);
+            }
+            k += 1;
+            Ok(())
+        })?;
+        let relations = relations_along(&kept);
+        if relations.is_empty() {
+            bail!(
+                "the reference trajectory {name} has {} poses within {MAX_DT} s of the {count} \
+                 scans used ({} to {} s), and they never move {SEGMENT_M} m or turn 30°: no \
+                 segment to score with (is it this log's?)",
+                kept.len(),
+                span.0,
+                span.1
+            );
+        }
+        Ok(Self {
+            log: log.display().to_string(),
+            path: log.to_path_buf(),
+            options,
+            scans: count,
+            relations,
+            against_default: false,
+            reference: Some(name),
+            trajectories: None,
+        })
+    }
+
+    /// Streams the log once (its first `scans` records) to count them and to check that some
+    /// of `relations` (named `relations_name` in errors) fall within them.
+    fn with_relations(
+        log: &Path,
+        relations: Vec<Relation>,
+        relations_name: &str,
+        scans: Option<NonZeroUsize>,
+        carmen: CarmenOptions,
+    ) -> Result<Self> {
         let options = LogOptions {
             carmen,
             ..LogOptions::default()
@@ -456,6 +540,7 @@ impl SweepInput {
             scans: count,
             relations,
             against_default: false,
+            reference: None,
             trajectories: None,
         })
     }
@@ -483,6 +568,7 @@ impl SweepInput {
             scans: count,
             relations: Vec::new(),
             against_default: true,
+            reference: None,
             trajectories: None,
         })
     }
@@ -556,6 +642,17 @@ pub const SEGMENT_M: f64 = 1.0;
 /// … or turned this much (30°, in rad) since it began.
 pub const SEGMENT_RAD: f64 = std::f64::consts::PI / 6.0;
 
+/// The pose of `trajectory` (sorted by time) nearest `t`, if within `max_dt`.
+fn nearest_within(trajectory: &[Stamped], t: f64, max_dt: f64) -> Option<&Stamped> {
+    let i = trajectory.partition_point(|s| s.0 < t);
+    [i.checked_sub(1), Some(i)]
+        .into_iter()
+        .flatten()
+        .filter_map(|j| trajectory.get(j))
+        .filter(|s| (s.0 - t).abs() <= max_dt)
+        .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+}
+
 /// Relations along a trajectory (time order): a chain of segments, each from a pose to the
 /// first later one that moved [`SEGMENT_M`] or turned [`SEGMENT_RAD`] from it, holding the
 /// trajectory's own motion over the segment. Scored against them, the trajectory itself has
@@ -611,6 +708,8 @@ pub fn report(
         scans: input.scans,
         scored_against: if input.against_default {
             ScoredAgainst::DefaultRun
+        } else if input.reference.is_some() {
+            ScoredAgainst::Reference
         } else {
             ScoredAgainst::Relations
         },
