@@ -451,10 +451,10 @@ impl SweepInput {
     /// A sweep scored against a reference trajectory of the log (TUM; another matcher's, a
     /// SLAM system's): relations drawn along its poses nearest the records every variant
     /// keeps, as [`relations_along`] draws them, a segment per [`SEGMENT_M`] or
-    /// [`SEGMENT_RAD`]. Streams the log once to count its records. For a log without relations whose trusted
-    /// trajectory is not the default run's: every run, the default's too, is scored by how
-    /// far its motion disagrees with the reference's, and the ratios say what each variant
-    /// costs.
+    /// [`SEGMENT_RAD`]. For a log without relations whose trusted trajectory is not the
+    /// default run's: every run, the default's too, is scored by how far its motion disagrees
+    /// with the reference's, and the ratios say what each variant costs. Streams the log once
+    /// to count its records.
     pub fn against_trajectory(
         log: &Path,
         reference: &Path,
