@@ -495,14 +495,8 @@ impl SweepInput {
             );
         }
         Ok(Self {
-            log: log.display().to_string(),
-            path: log.to_path_buf(),
-            options,
-            scans: count,
-            relations,
-            against_default: false,
             reference: Some(name),
-            trajectories: None,
+            ..Self::counted(log, options, count, relations)
         })
     }
 
@@ -533,16 +527,7 @@ impl SweepInput {
                 span.1
             );
         }
-        Ok(Self {
-            log: log.display().to_string(),
-            path: log.to_path_buf(),
-            options,
-            scans: count,
-            relations,
-            against_default: false,
-            reference: None,
-            trajectories: None,
-        })
+        Ok(Self::counted(log, options, count, relations))
     }
 
     /// A sweep of a log without relations (CARMEN read as `carmen` says, or a bag): every
@@ -562,15 +547,24 @@ impl SweepInput {
         };
         let (count, _) = count_records(log, &options, scans, |_, _| Ok(()))?;
         Ok(Self {
+            against_default: true,
+            ..Self::counted(log, options, count, Vec::new())
+        })
+    }
+
+    /// The input of `log` read with `options`, `scans` records counted, scored with
+    /// `relations`.
+    fn counted(log: &Path, options: LogOptions, scans: usize, relations: Vec<Relation>) -> Self {
+        Self {
             log: log.display().to_string(),
             path: log.to_path_buf(),
             options,
-            scans: count,
-            relations: Vec::new(),
-            against_default: true,
+            scans,
+            relations,
+            against_default: false,
             reference: None,
             trajectories: None,
-        })
+        }
     }
 
     /// Makes every run write its trajectory to `dir/<run>.tum` (TUM format; the run's name
