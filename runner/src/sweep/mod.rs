@@ -445,7 +445,25 @@ impl SweepInput {
         if relations.is_empty() {
             bail!("{relations_name} holds no relations");
         }
-        Self::with_relations(log, relations, &relations_name, scans, carmen)
+        let options = LogOptions {
+            carmen,
+            ..LogOptions::default()
+        };
+        let mut probe = RelationProbe::new(&relations, MAX_DT)?;
+        let (count, span) = count_records(log, &options, scans, |t, odometry| {
+            probe.push(t, odometry).map_err(anyhow::Error::from)
+        })?;
+        let (found, _) = relation_errors(&probe.trajectory(), &relations, MAX_DT)?;
+        if found.is_empty() {
+            bail!(
+                "none of the {} relations of {relations_name} falls within the {count} scans \
+                 used ({} to {} s): do they belong to this log?",
+                relations.len(),
+                span.0,
+                span.1
+            );
+        }
+        Ok(Self::counted(log, options, count, relations))
     }
 
     /// A sweep scored against a reference trajectory of the log (TUM; another matcher's, a
@@ -498,36 +516,6 @@ impl SweepInput {
             reference: Some(name),
             ..Self::counted(log, options, count, relations)
         })
-    }
-
-    /// Streams the log once (its first `scans` records) to count them and to check that some
-    /// of `relations` (named `relations_name` in errors) fall within them.
-    fn with_relations(
-        log: &Path,
-        relations: Vec<Relation>,
-        relations_name: &str,
-        scans: Option<NonZeroUsize>,
-        carmen: CarmenOptions,
-    ) -> Result<Self> {
-        let options = LogOptions {
-            carmen,
-            ..LogOptions::default()
-        };
-        let mut probe = RelationProbe::new(&relations, MAX_DT)?;
-        let (count, span) = count_records(log, &options, scans, |t, odometry| {
-            probe.push(t, odometry).map_err(anyhow::Error::from)
-        })?;
-        let (found, _) = relation_errors(&probe.trajectory(), &relations, MAX_DT)?;
-        if found.is_empty() {
-            bail!(
-                "none of the {} relations of {relations_name} falls within the {count} scans \
-                 used ({} to {} s): do they belong to this log?",
-                relations.len(),
-                span.0,
-                span.1
-            );
-        }
-        Ok(Self::counted(log, options, count, relations))
     }
 
     /// A sweep of a log without relations (CARMEN read as `carmen` says, or a bag): every
