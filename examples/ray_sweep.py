@@ -2,14 +2,17 @@
 
     python examples/ray_sweep.py LOG [RELATIONS] [--matcher q-wsm | --config FILE] [--scans N]
         [--variants a,b,...] [--address auto|local|ray://HOST:10001] [--out FILE]
-        [--drawn-relations FILE]
+        [--reference TUM] [--drawn-relations FILE]
 
 Writes the JSON report of `qicp sweep LOG --matcher ... --relations RELATIONS --json`: the
 same runs, the same figures (only the wall times per scan differ), the same ratios. Without
 RELATIONS it is the report of `qicp sweep LOG --json`, a sweep against the default run: the
 default runs first (one task), writing the relations drawn along its trajectory to
 `--drawn-relations` (default: a temporary file, which on a cluster must be replaced by a path
-every node reads), and the variants' tasks are scored with them.
+every node reads), and the variants' tasks are scored with them. With `--reference TUM`
+instead of RELATIONS it is the report of `qicp sweep LOG --reference TUM`: the relations are
+drawn along that trajectory first (to `--drawn-relations`), and every run, the default's too,
+is scored with them.
 
 On one machine, `--address local` starts a Ray instance for the sweep and stops it after. On a
 cluster, start Ray on the nodes (`ray start --head` on one, `ray start --address HEAD:6379` on
@@ -57,7 +60,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("log")
     ap.add_argument("relations", nargs="?", help="Freiburg relations (default: the default run's)")
-    ap.add_argument("--drawn-relations", help="where the default run's relations go (no RELATIONS)")
+    ap.add_argument("--reference", help="a TUM trajectory to score every run against (no RELATIONS)")
+    ap.add_argument("--drawn-relations",
+                    help="where the relations drawn along the default run or the reference go")
     ap.add_argument("--matcher", default="q-wsm")
     ap.add_argument("--config", help="TOML file with a [matcher] table (instead of --matcher)")
     ap.add_argument("--scans", type=int, help="use only the first N records of the log")
@@ -66,6 +71,8 @@ def main(argv=None) -> int:
     ap.add_argument("--address", default="local", help="auto, local, or a Ray address")
     ap.add_argument("--out", help="write the JSON report here (default: stdout)")
     a = ap.parse_args(argv)
+    if a.relations is not None and a.reference is not None:
+        ap.error("RELATIONS and --reference cannot be used together")
 
     names = qicp.sweep_variants(a.matcher, config=a.config)
     if a.variants:
@@ -76,14 +83,19 @@ def main(argv=None) -> int:
         names = [n for n in names if n in wanted]
     names = ["default", *names]
 
-    against_default = a.relations is None
+    against_default = a.relations is None and a.reference is None
     scratch = None
     relations = a.relations
-    if against_default:
+    if relations is None:
         relations = a.drawn_relations
         if relations is None:
             scratch = tempfile.TemporaryDirectory(prefix="qicp-ray-sweep-")
-            relations = os.path.join(scratch.name, "default.relations")
+            relations = os.path.join(scratch.name, "drawn.relations")
+    if a.reference is not None:
+        try:
+            qicp.reference_relations(a.log, a.reference, relations, scans=a.scans, lenient=a.lenient)
+        except qicp.QicpError as e:
+            sys.exit(str(e))
 
     def report_on(name, result):
         if isinstance(result, str):
@@ -113,7 +125,7 @@ def main(argv=None) -> int:
 
     report = qicp.sweep_report(
         a.log, relations, results, matcher=a.matcher, config=a.config, scans=a.scans,
-        lenient=a.lenient, against_default=against_default,
+        lenient=a.lenient, against_default=against_default, reference=a.reference,
     )
     if scratch is not None:
         scratch.cleanup()

@@ -19,6 +19,7 @@ __all__ = [
     "read_bag",
     "read_carmen",
     "read_tum",
+    "reference_relations",
     "sweep_relations",
     "sweep_report",
     "sweep_run",
@@ -228,6 +229,18 @@ def sweep_relations(
     ``--relations``): writes to ``out`` the relations drawn along its trajectory, which the
     variants' ``sweep_run`` calls are scored with, and returns its figures."""
 
+def reference_relations(
+    log: _StrPath,
+    reference: _StrPath,
+    out: _StrPath,
+    *,
+    scans: Optional[int] = None,
+    lenient: bool = False,
+) -> int:
+    """The relations of a sweep against a reference trajectory (``qicp sweep LOG --reference
+    TUM``): writes to ``out`` the segments drawn along the TUM trajectory ``reference``, which
+    every run's ``sweep_run`` (the default's too) is scored with, and returns their number."""
+
 def sweep_report(
     log: _StrPath,
     relations: _StrPath,
@@ -238,7 +251,9 @@ def sweep_report(
     scans: Optional[int] = None,
     lenient: bool = False,
     against_default: bool = False,
+    reference: Optional[_StrPath] = None,
 ) -> str:
     """The JSON report of ``qicp sweep --json`` from every run's figures or failure message,
     the default first; with ``against_default``, that of a sweep against the default run
-    (``relations`` from ``sweep_relations``)."""
+    (``relations`` from ``sweep_relations``); with ``reference``, that of ``--reference``
+    (``relations`` from ``reference_relations``)."""

@@ -22,7 +22,7 @@ mod sweep;
 use evaluation::{ate, evaluate_relations, read_tum, write_tum};
 use logs::{LaserRecord, Log, read_bag, read_carmen};
 use matcher::{MatchResult, Matcher, matcher_names};
-use sweep::{sweep_relations, sweep_report, sweep_run, sweep_variants};
+use sweep::{reference_relations, sweep_relations, sweep_report, sweep_run, sweep_variants};
 
 create_exception!(
     _qicp,
@@ -96,6 +96,7 @@ fn _qicp(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sweep_variants, m)?)?;
     m.add_function(wrap_pyfunction!(sweep_run, m)?)?;
     m.add_function(wrap_pyfunction!(sweep_relations, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_relations, m)?)?;
     m.add_function(wrap_pyfunction!(sweep_report, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

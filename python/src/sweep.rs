@@ -114,6 +114,43 @@ pub(crate) fn sweep_relations<'py>(
     figures_dict(py, &figures.map_err(|e| anyhow_refusal(&e))?)
 }
 
+/// The relations of a sweep scored against a reference trajectory of the log (TUM), as
+/// `qicp sweep LOG --reference TUM` draws them: a segment per metre driven or 30° turned along
+/// the reference's poses nearest the records every variant keeps among the log's first `scans`.
+/// Writes them to `out` in the Freiburg format, renamed into place when complete, and returns
+/// how many there are. Every run, the default's too, is then `sweep_run(log, out, name)` and
+/// the report `sweep_report(log, out, results, reference=reference)`.
+#[pyfunction]
+#[pyo3(signature = (log, reference, out, *, scans = None, lenient = false))]
+pub(crate) fn reference_relations(
+    py: Python<'_>,
+    log: PathBuf,
+    reference: PathBuf,
+    out: PathBuf,
+    scans: Option<usize>,
+    lenient: bool,
+) -> PyResult<usize> {
+    py.detach(|| -> anyhow::Result<_> {
+        // The file is checked (and its temporary made) before the log is read.
+        let mut file = qicp_runner::output::OutputFile::create(&out)?;
+        let carmen = qicp_io::carmen::CarmenOptions {
+            lenient,
+            ..Default::default()
+        };
+        let input = qicp_runner::sweep::SweepInput::against_trajectory(
+            &log,
+            &reference,
+            scans.and_then(std::num::NonZeroUsize::new),
+            carmen,
+        )?;
+        qicp_io::relations::write_relations(&mut file, &input.relations)
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+        file.commit()?;
+        Ok(input.relations.len())
+    })
+    .map_err(|e| anyhow_refusal(&e))
+}
+
 /// One run of `qicp sweep`: `variant` (`"default"` or a name of `sweep_variants`) of the
 /// matcher on the log's first `scans` records, scored with the relations. Returns the run's
 /// figures (the keys of a variant in `qicp sweep --json`); a run that cannot be made raises
@@ -151,9 +188,11 @@ pub(crate) fn sweep_run<'py>(
 /// to the message of its failure. Returns the report's JSON text, as `qicp sweep --json`
 /// prints it. With `against_default`, `relations` are those `sweep_relations` drew along the
 /// default run, and the report is that of `qicp sweep` without `--relations` (no ratios).
+/// With `reference` (the TUM trajectory `reference_relations` drew `relations` along), it is
+/// that of `qicp sweep --reference`.
 #[pyfunction]
 #[pyo3(signature = (log, relations, results, *, matcher = "q-wsm", config = None, scans = None,
-                    lenient = false, against_default = false))]
+                    lenient = false, against_default = false, reference = None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sweep_report(
     py: Python<'_>,
@@ -165,11 +204,18 @@ pub(crate) fn sweep_report(
     scans: Option<usize>,
     lenient: bool,
     against_default: bool,
+    reference: Option<PathBuf>,
 ) -> PyResult<String> {
     use qicp_runner::sweep::{RunFigures, report, variant_report};
+    if against_default && reference.is_some() {
+        return Err(QicpError::new_err(
+            "a sweep is scored against the default run or against a reference, not both",
+        ));
+    }
     let config = sweep_config(matcher, config)?;
     let mut input = py.detach(|| sweep_input(&log, &relations, scans, lenient))?;
     input.against_default = against_default;
+    input.reference = reference.map(|r| r.display().to_string());
     let figures = |v: &Bound<'_, PyAny>| -> PyResult<Result<RunFigures, String>> {
         if let Ok(message) = v.extract::<String>() {
             return Ok(Err(message));

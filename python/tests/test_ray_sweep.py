@@ -63,3 +63,33 @@ def test_the_ray_sweep_without_relations_reports_what_qicp_sweep_reports(intel, 
     assert all(v["ratio"] is None for v in ours["variants"])
     # The drawn relations are the segments the variants were scored with.
     assert len([l for l in drawn.read_text().splitlines() if l.strip()]) == ours["relations_total"]
+
+
+def test_the_ray_sweep_against_a_reference_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path):
+    # idc's trajectory over the first records as the reference, q-wsm swept against it.
+    matched = run_cli(qicp_bin, "match", intel, "--matcher", "idc", "--out", tmp_path / "idc")
+    assert matched.returncode == 0, matched.stderr
+    reference = tmp_path / "idc" / "trajectory.tum"
+    variants = "scans/2,relevance.tau_max*1.4"
+    cli = run_cli(
+        qicp_bin, "sweep", intel, "--matcher", "q-wsm", "--reference", reference,
+        "--scans", SCANS, "--variants", variants, "--json", "--jobs", "2",
+    )
+    assert cli.returncode == 0, cli.stderr
+    out, drawn = tmp_path / "ray.json", tmp_path / "reference.relations"
+    script = [sys.executable, str(REPO / "examples" / "ray_sweep.py"), str(intel)]
+    opts = ["--matcher", "q-wsm", "--scans", SCANS, "--address", "local", "--variants", variants,
+            "--reference", str(reference)]
+    done = subprocess.run([*script, *opts, "--out", str(out), "--drawn-relations", str(drawn)],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    ours, theirs = json.loads(out.read_text()), json.loads(cli.stdout)
+    assert without_times(ours) == without_times(theirs)
+    assert ours["scored_against"] == "reference trajectory"
+    # q-wsm disagrees with idc's drift: the default is scored, not zero, and has ratios.
+    assert ours["default"]["trans_mean"] > 0.0
+    assert all(v["ratio"] is not None for v in ours["variants"])
+    assert len([l for l in drawn.read_text().splitlines() if l.strip()]) == ours["relations_total"]
+
+    both = subprocess.run([*script, str(INTEL_RELATIONS), *opts], capture_output=True, text=True)
+    assert both.returncode != 0 and "cannot be used together" in both.stderr
