@@ -192,3 +192,13 @@ def test_ate_is_the_command_lines(intel, qicp_bin, tmp_path):
     py = qicp.ate(qicp.read_tum(tmp_path / "est.tum"), qicp.read_tum(tmp_path / "truth.tum"))
     assert py == json.loads(cli.stdout)
     assert qicp.ate(truth, truth)["ate_rmse_m"] == 0.0
+
+
+def test_a_reference_of_another_log_draws_no_relations_and_writes_nothing(intel, tmp_path):
+    # One pose far from the log's times: no segment, refused before anything is written.
+    reference = tmp_path / "other.tum"
+    reference.write_text("1 0 0 0 0 0 0 1\n2 5 0 0 0 0 0 1\n")
+    out = tmp_path / "drawn.relations"
+    with pytest.raises(qicp.QicpError, match="is it this log's"):
+        qicp.reference_relations(intel, reference, out, scans=100)
+    assert not out.exists() and list(tmp_path.iterdir()) == [reference]
