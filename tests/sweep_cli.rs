@@ -401,6 +401,11 @@ fn sweep_against_a_reference_trajectory_scores_the_default_too() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let report: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
     assert_eq!(report["scored_against"], "reference trajectory");
+    assert_eq!(
+        report["reference"],
+        reference.as_str(),
+        "the report names its reference"
+    );
     let segments = report["relations_total"].as_u64().expect("segments");
     assert!(segments > 10, "{report}");
     assert!(f(&report["default"]["trans_mean"]) < 1e-9, "{report}");

@@ -90,11 +90,15 @@ pub struct SweepReport {
     pub matcher: String,
     /// Records of the log used.
     pub scans: usize,
-    /// What the runs are scored with: `"relations"` (the relations file's) or `"default
-    /// run"` (relations drawn along the default run's trajectory, for a log without any:
+    /// What the runs are scored with: `"relations"` (the relations file's), `"default run"`
+    /// (relations drawn along the default run's trajectory, for a log without any:
     /// [`SweepInput::against_default`]; the figures are then disagreements with the default,
-    /// and there are no ratios).
+    /// and there are no ratios) or `"reference trajectory"` (relations drawn along
+    /// [`reference`](Self::reference): [`SweepInput::against_trajectory`]).
     pub scored_against: ScoredAgainst,
+    /// The reference trajectory's file, when the runs are scored against one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference: Option<String>,
     /// Relations in the relations file (against the default run: the segments drawn along
     /// its trajectory).
     pub relations_total: usize,
@@ -310,9 +314,13 @@ pub fn table(report: &SweepReport) -> String {
     } else if report.scored_against == ScoredAgainst::Reference {
         let _ = writeln!(
             out,
-            "{} on {} ({} scans), scored against the reference trajectory: its motion over {} \
-             segments of {SEGMENT_M} m or 30°; errors are disagreements with it",
-            report.matcher, report.log, report.scans, report.relations_total
+            "{} on {} ({} scans), scored against the reference trajectory {}: its motion over \
+             {} segments of {SEGMENT_M} m or 30°; errors are disagreements with it",
+            report.matcher,
+            report.log,
+            report.scans,
+            report.reference.as_deref().unwrap_or("?"),
+            report.relations_total
         );
     } else {
         let _ = writeln!(
@@ -695,6 +703,7 @@ pub fn report(
         } else {
             ScoredAgainst::Relations
         },
+        reference: input.reference.clone(),
         relations_total: if input.against_default {
             default.relations
         } else {
