@@ -72,6 +72,28 @@ fn figures_dict<'py>(
     Ok(d)
 }
 
+/// Writes to `out` the relations `draw` makes from the log (read with `lenient`), renamed into
+/// place when complete: the file is checked (and its temporary made) before the log is read.
+/// Returns what `draw` returns beside them.
+fn write_drawn_relations<T>(
+    out: &std::path::Path,
+    lenient: bool,
+    draw: impl FnOnce(
+        qicp_io::carmen::CarmenOptions,
+    ) -> anyhow::Result<(T, Vec<qicp_io::relations::Relation>)>,
+) -> anyhow::Result<T> {
+    let mut file = qicp_runner::output::OutputFile::create(out)?;
+    let carmen = qicp_io::carmen::CarmenOptions {
+        lenient,
+        ..Default::default()
+    };
+    let (value, relations) = draw(carmen)?;
+    qicp_io::relations::write_relations(&mut file, &relations)
+        .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+    file.commit()?;
+    Ok(value)
+}
+
 /// The default run of a sweep on a log without relations, as `qicp sweep LOG` (no
 /// `--relations`) makes it: the matcher as configured on the log's first `scans` records, and
 /// the relations drawn along its trajectory (a segment per metre driven or 30° turned, on the
@@ -92,24 +114,17 @@ pub(crate) fn sweep_relations<'py>(
     lenient: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let job = sweep_job(matcher, config, "default")?;
-    let figures = py.detach(|| -> anyhow::Result<_> {
-        // The file is checked (and its temporary made) before any matching.
-        let mut file = qicp_runner::output::OutputFile::create(&out)?;
-        let carmen = qicp_io::carmen::CarmenOptions {
-            lenient,
-            ..Default::default()
-        };
-        let input = qicp_runner::sweep::SweepInput::against_default(
-            &log,
-            scans.and_then(std::num::NonZeroUsize::new),
-            carmen,
-        )?;
-        let (default, relations) = qicp_runner::sweep::default_relations(&input, &job)?;
-        let default = default.map_err(|e| anyhow::anyhow!("the default run failed: {e}"))?;
-        qicp_io::relations::write_relations(&mut file, &relations)
-            .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
-        file.commit()?;
-        Ok(default)
+    let figures = py.detach(|| {
+        write_drawn_relations(&out, lenient, |carmen| {
+            let input = qicp_runner::sweep::SweepInput::against_default(
+                &log,
+                scans.and_then(std::num::NonZeroUsize::new),
+                carmen,
+            )?;
+            let (default, relations) = qicp_runner::sweep::default_relations(&input, &job)?;
+            let default = default.map_err(|e| anyhow::anyhow!("the default run failed: {e}"))?;
+            Ok((default, relations))
+        })
     });
     figures_dict(py, &figures.map_err(|e| anyhow_refusal(&e))?)
 }
@@ -130,23 +145,16 @@ pub(crate) fn reference_relations(
     scans: Option<usize>,
     lenient: bool,
 ) -> PyResult<usize> {
-    py.detach(|| -> anyhow::Result<_> {
-        // The file is checked (and its temporary made) before the log is read.
-        let mut file = qicp_runner::output::OutputFile::create(&out)?;
-        let carmen = qicp_io::carmen::CarmenOptions {
-            lenient,
-            ..Default::default()
-        };
-        let input = qicp_runner::sweep::SweepInput::against_trajectory(
-            &log,
-            &reference,
-            scans.and_then(std::num::NonZeroUsize::new),
-            carmen,
-        )?;
-        qicp_io::relations::write_relations(&mut file, &input.relations)
-            .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
-        file.commit()?;
-        Ok(input.relations.len())
+    py.detach(|| {
+        write_drawn_relations(&out, lenient, |carmen| {
+            let input = qicp_runner::sweep::SweepInput::against_trajectory(
+                &log,
+                &reference,
+                scans.and_then(std::num::NonZeroUsize::new),
+                carmen,
+            )?;
+            Ok((input.relations.len(), input.relations))
+        })
     })
     .map_err(|e| anyhow_refusal(&e))
 }

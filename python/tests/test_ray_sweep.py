@@ -43,53 +43,46 @@ def test_the_ray_sweep_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path
     assert refused.returncode != 0 and "unknown variants nope.nothing*0.7" in refused.stderr
 
 
-def test_the_ray_sweep_without_relations_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path):
-    variants = "scans/2,odom-bias,relevance.tau_max*1.4"
-    cli = run_cli(
-        qicp_bin, "sweep", intel, "--matcher", "q-wsm", "--scans", SCANS,
-        "--variants", variants, "--json", "--jobs", "2",
-    )
+def drawn_sweep(intel, qicp_bin, tmp_path, variants, *scored):
+    """`qicp sweep` and the Ray sweep without a relations file (`scored`: `--reference TUM`, or
+    nothing for the default run's relations); checks that both report alike and that the drawn
+    relations are the segments the runs were scored with. Returns the report, the script and
+    its options."""
+    common = ["--matcher", "q-wsm", "--scans", SCANS, "--variants", variants, *map(str, scored)]
+    cli = run_cli(qicp_bin, "sweep", intel, *common, "--json", "--jobs", "2")
     assert cli.returncode == 0, cli.stderr
-    out, drawn = tmp_path / "ray.json", tmp_path / "default.relations"
+    out, drawn = tmp_path / "ray.json", tmp_path / "drawn.relations"
     script = [sys.executable, str(REPO / "examples" / "ray_sweep.py"), str(intel)]
-    opts = ["--matcher", "q-wsm", "--scans", SCANS, "--address", "local", "--variants", variants]
+    opts = [*common, "--address", "local"]
     done = subprocess.run([*script, *opts, "--out", str(out), "--drawn-relations", str(drawn)],
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     ours, theirs = json.loads(out.read_text()), json.loads(cli.stdout)
     assert without_times(ours) == without_times(theirs)
+    assert len([l for l in drawn.read_text().splitlines() if l.strip()]) == ours["relations_total"]
+    return ours, script, opts
+
+
+def test_the_ray_sweep_without_relations_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path):
+    ours, _, _ = drawn_sweep(intel, qicp_bin, tmp_path, "scans/2,odom-bias,relevance.tau_max*1.4")
     assert ours["scored_against"] == "default run"
     assert ours["default"]["trans_mean"] < 1e-9
     assert all(v["ratio"] is None for v in ours["variants"])
-    # The drawn relations are the segments the variants were scored with.
-    assert len([l for l in drawn.read_text().splitlines() if l.strip()]) == ours["relations_total"]
 
 
 def test_the_ray_sweep_against_a_reference_reports_what_qicp_sweep_reports(intel, qicp_bin, tmp_path):
-    # idc's trajectory over the first records as the reference, q-wsm swept against it.
+    # idc's trajectory as the reference, q-wsm swept against it.
     matched = run_cli(qicp_bin, "match", intel, "--matcher", "idc", "--out", tmp_path / "idc")
     assert matched.returncode == 0, matched.stderr
     reference = tmp_path / "idc" / "trajectory.tum"
-    variants = "scans/2,relevance.tau_max*1.4"
-    cli = run_cli(
-        qicp_bin, "sweep", intel, "--matcher", "q-wsm", "--reference", reference,
-        "--scans", SCANS, "--variants", variants, "--json", "--jobs", "2",
+    ours, script, opts = drawn_sweep(
+        intel, qicp_bin, tmp_path, "scans/2,relevance.tau_max*1.4", "--reference", reference
     )
-    assert cli.returncode == 0, cli.stderr
-    out, drawn = tmp_path / "ray.json", tmp_path / "reference.relations"
-    script = [sys.executable, str(REPO / "examples" / "ray_sweep.py"), str(intel)]
-    opts = ["--matcher", "q-wsm", "--scans", SCANS, "--address", "local", "--variants", variants,
-            "--reference", str(reference)]
-    done = subprocess.run([*script, *opts, "--out", str(out), "--drawn-relations", str(drawn)],
-                          capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
-    ours, theirs = json.loads(out.read_text()), json.loads(cli.stdout)
-    assert without_times(ours) == without_times(theirs)
     assert ours["scored_against"] == "reference trajectory"
+    assert ours["reference"] == str(reference)
     # q-wsm disagrees with idc's drift: the default is scored, not zero, and has ratios.
     assert ours["default"]["trans_mean"] > 0.0
     assert all(v["ratio"] is not None for v in ours["variants"])
-    assert len([l for l in drawn.read_text().splitlines() if l.strip()]) == ours["relations_total"]
 
     both = subprocess.run([*script, str(INTEL_RELATIONS), *opts], capture_output=True, text=True)
     assert both.returncode != 0 and "cannot be used together" in both.stderr
