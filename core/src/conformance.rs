@@ -41,6 +41,13 @@ fn sorted_ids(v: &[Neighbour]) -> Vec<u32> {
 /// nearest within four limits, radius queries of four radii and k-nearest for k = 1, 3, 10,
 /// at 300 seeded queries and on and beside stored points.
 pub fn check_against_oracle<I: SpatialIndex + Default>(points: &[Point2<f64>], seed: u64) {
+    let (index, oracle) = build::<I>(points);
+    assert_eq!(index.len(), points.len());
+    compare(&index, &oracle, points, seed);
+}
+
+/// `I` and the oracle, each with `points` inserted in order.
+fn build<I: SpatialIndex + Default>(points: &[Point2<f64>]) -> (I, BruteForce) {
     let mut index = I::default();
     let mut oracle = BruteForce::new();
     for p in points {
@@ -48,7 +55,55 @@ pub fn check_against_oracle<I: SpatialIndex + Default>(points: &[Point2<f64>], s
         let b = oracle.insert(*p).expect("the conformance case is valid");
         assert_eq!(a, b, "ids are insertion order");
     }
-    assert_eq!(index.len(), points.len());
+    (index, oracle)
+}
+
+/// Removes a seeded third of `points` from `I` and from the oracle, then a point already
+/// removed again, then inserts the removed points' coordinates anew (into the emptied
+/// buckets and duplicate chains): every query answers as the oracle's after each step. An
+/// index that cannot remove points ([`SpatialIndex::remove`] gives `None`) must say so for
+/// every id, and is left at that.
+pub fn check_removal<I: SpatialIndex + Default>(points: &[Point2<f64>], seed: u64) {
+    let (mut index, mut oracle) = build::<I>(points);
+    let mut r = SplitMix::new(seed ^ 0x5eed);
+    let doomed: Vec<u32> = (0..points.len() as u32)
+        .filter(|_| r.range(0.0, 3.0) < 1.0)
+        .collect();
+    let Some(&first) = doomed.first() else {
+        return;
+    };
+    if index.remove(first).is_none() {
+        assert!(
+            doomed.iter().all(|&id| index.remove(id).is_none()),
+            "an index removes all points or none"
+        );
+        return;
+    }
+    assert_eq!(oracle.remove(first), Some(true));
+    for &id in &doomed[1..] {
+        assert_eq!(index.remove(id), Some(true), "point {id} was held");
+        assert_eq!(oracle.remove(id), Some(true));
+    }
+    assert_eq!(index.remove(first), Some(false), "a point is removed once");
+    assert_eq!(
+        index.remove(points.len() as u32),
+        Some(false),
+        "no such point"
+    );
+    assert_eq!(index.points(), points, "ids stay put");
+    compare(&index, &oracle, points, seed);
+    let mut all = points.to_vec();
+    for &id in &doomed {
+        let p = points[id as usize];
+        let a = index.insert(p).expect("a finite point");
+        assert_eq!(a, oracle.insert(p).expect("a finite point"));
+        all.push(p);
+    }
+    compare(&index, &oracle, &all, seed + 1);
+}
+
+/// Every kind of query of `index` against the oracle's (see [`check_against_oracle`]).
+fn compare<I: SpatialIndex>(index: &I, oracle: &BruteForce, points: &[Point2<f64>], seed: u64) {
     assert_eq!(index.points(), oracle.points());
     let (mut got, mut want) = (Vec::new(), Vec::new());
     for q in queries(points, 300, seed) {
@@ -88,7 +143,7 @@ pub fn check_against_oracle<I: SpatialIndex + Default>(points: &[Point2<f64>], s
         ] {
             let a = index.nearest_and_around(&q, limit, slack, max_reach, &mut got);
             let b =
-                crate::index::nearest_then_around(&oracle, &q, limit, slack, max_reach, &mut want);
+                crate::index::nearest_then_around(oracle, &q, limit, slack, max_reach, &mut want);
             assert_eq!(
                 (a.0.map(|n| n.dist_sq), a.1),
                 (b.0.map(|n| n.dist_sq), b.1),
@@ -97,7 +152,7 @@ pub fn check_against_oracle<I: SpatialIndex + Default>(points: &[Point2<f64>], s
             assert_eq!(sorted_ids(&got), sorted_ids(&want), "around {q}");
             // The same points in the same order as the index's own two searches.
             let c =
-                crate::index::nearest_then_around(&index, &q, limit, slack, max_reach, &mut want);
+                crate::index::nearest_then_around(index, &q, limit, slack, max_reach, &mut want);
             assert_eq!((a.0.map(|n| n.id), a.1), (c.0.map(|n| n.id), c.1));
             assert_eq!(got, want, "in within_radius's order, around {q}");
         }
@@ -251,6 +306,10 @@ macro_rules! index_conformance {
             #[test] fn axis_aligned() { check_against_oracle::<$index>(&axis_aligned_lines(), 4) }
             #[test] fn far_outside_first_bounds() { check_against_oracle::<$index>(&far_outside(5), 5) }
             #[test] fn tiny_clusters() { check_against_oracle::<$index>(&uniform(2000, 1e-5, 6), 6) }
+            #[test] fn removal_uniform() { check_removal::<$index>(&uniform(3000, 50.0, 8), 8) }
+            #[test] fn removal_laser_like() { check_removal::<$index>(&laser_scans(8_000, 9), 9) }
+            #[test] fn removal_heavy_duplicates() { check_removal::<$index>(&duplicates(10), 10) }
+            #[test] fn removal_tiny_clusters() { check_removal::<$index>(&uniform(2000, 1e-5, 11), 11) }
             #[test] fn bad_points() { refuses_bad_points::<$index>() }
             #[test] fn empty_and_single_point() { empty_and_single::<$index>() }
         }

@@ -153,6 +153,14 @@ pub trait SpatialIndex {
         nearest_then_around(self, q, max_dist_sq, slack, max_reach, out)
     }
 
+    /// Takes point `id` out of every later search; its id is not reused and
+    /// [`points`](Self::points) still holds it, so other ids stay put. `Some(true)` when it was
+    /// held, `Some(false)` when it was not (or is removed already), `None` when this index
+    /// cannot remove points (the default): the caller rebuilds the index instead.
+    fn remove(&mut self, _id: PointId) -> Option<bool> {
+        None
+    }
+
     /// The nearest point, if the index is not empty.
     fn nearest(&self, q: &Point2<f64>) -> Option<Neighbour> {
         self.nearest_within(q, f64::INFINITY)
@@ -192,6 +200,8 @@ pub trait SpatialIndex {
 #[derive(Debug, Clone, Default)]
 pub struct BruteForce {
     points: Vec<Point2<f64>>,
+    /// Per point: taken out of the searches ([`SpatialIndex::remove`]).
+    removed: Vec<bool>,
 }
 
 impl BruteForce {
@@ -200,17 +210,35 @@ impl BruteForce {
     pub fn new() -> Self {
         Self::default()
     }
+
+    /// The points searches see, with their ids: all but the removed ones.
+    fn held(&self) -> impl Iterator<Item = (usize, &Point2<f64>)> {
+        self.points
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !self.removed[*i])
+    }
 }
 
 impl SpatialIndex for BruteForce {
     fn insert(&mut self, p: Point2<f64>) -> Result<PointId, IndexError> {
         check_point(&p, self.points.len())?;
         self.points.push(p);
+        self.removed.push(false);
         Ok((self.points.len() - 1) as PointId)
     }
 
     fn clear(&mut self) {
         self.points.clear();
+        self.removed.clear();
+    }
+
+    fn remove(&mut self, id: PointId) -> Option<bool> {
+        Some(
+            self.removed
+                .get_mut(id as usize)
+                .is_some_and(|r| !std::mem::replace(r, true)),
+        )
     }
 
     fn points(&self) -> &[Point2<f64>] {
@@ -222,7 +250,7 @@ impl SpatialIndex for BruteForce {
             return None;
         }
         let mut best: Option<Neighbour> = None;
-        for (i, p) in self.points.iter().enumerate() {
+        for (i, p) in self.held() {
             let d = dist_sq(p, q);
             if d <= max_dist_sq && best.is_none_or(|b| d < b.dist_sq) {
                 best = Some(Neighbour {
@@ -241,7 +269,7 @@ impl SpatialIndex for BruteForce {
             return;
         }
         let r2 = radius * radius;
-        for (i, p) in self.points.iter().enumerate() {
+        for (i, p) in self.held() {
             let d = dist_sq(p, q);
             if d <= r2 {
                 out.push(Neighbour {
@@ -258,7 +286,7 @@ impl SpatialIndex for BruteForce {
         if k == 0 || !(q.x.is_finite() && q.y.is_finite()) {
             return;
         }
-        out.extend(self.points.iter().enumerate().map(|(i, p)| Neighbour {
+        out.extend(self.held().map(|(i, p)| Neighbour {
             id: i as PointId,
             point: *p,
             dist_sq: dist_sq(p, q),

@@ -6,7 +6,7 @@
 //! Alg. 1). Either way the matcher sees the same type.
 
 use crate::index::{IndexError, Neighbour, PointId, SpatialIndex};
-use crate::{Pose2, Scan};
+use crate::{BeamStatus, Pose2, Scan};
 use nalgebra::{Matrix2, Point2, Vector2};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -208,6 +208,15 @@ pub struct Merge {
     /// off the surface (another wall, a corner, a gap wider than the samples' spacing) still
     /// enters. 0 (or a value that is not finite and positive) inserts such points.
     pub surface_band: f64,
+    /// Free-space carving: a map point that a merged scan sees through (both beams around its
+    /// bearing return from beyond it by more than this, m) counts one miss; a point whose
+    /// bearing beams return within this of its range counts one look (its insertion is the
+    /// first). A point missed at least twice and more often than looked at leaves the map's
+    /// searches at once, as an occupancy grid frees a cell its beams cross: a wall copied in
+    /// by a bad match, a person who walked by. Only points within 10 m of the laser are
+    /// looked at, and only between two valid beams. 0 (or a value that is not finite and
+    /// positive) carves nothing.
+    pub free_space_margin: f64,
 }
 
 /// What a full cell of the cell cap ([`Merge::max_cell_points`]) does with a new point.
@@ -237,6 +246,7 @@ impl Merge {
             max_cell_points: 0,
             full_cell: FullCell::EvictStalest,
             surface_band: 0.0,
+            free_space_margin: 0.0,
         }
     }
 
@@ -271,6 +281,11 @@ pub struct Reference<I> {
     live: Vec<bool>,
     /// Points replaced and still in the index.
     stale: usize,
+    /// Per point: the scans that looked at it and the scans that saw through it
+    /// ([`Merge::free_space_margin`]).
+    looks: Vec<(u16, u16)>,
+    /// Scratch of the carving's radius search.
+    around: Vec<Neighbour>,
     /// The noise of the laser whose scans enter, and of the scans matched against them.
     noise: LaserNoise,
 }
@@ -297,6 +312,8 @@ impl<I: SpatialIndex> Reference<I> {
             confirmed: Vec::new(),
             live: Vec::new(),
             stale: 0,
+            looks: Vec::new(),
+            around: Vec::new(),
             noise,
         }
     }
@@ -319,28 +336,30 @@ impl<I: SpatialIndex> Reference<I> {
         &self.info
     }
 
-    /// Number of points in the index, those a full cell replaced and the next rebuild drops
-    /// included ([`Reference::stale_len`]).
+    /// Number of points in the index, those a full cell replaced or carving removed and the
+    /// next rebuild drops included ([`Reference::stale_len`]).
     #[must_use]
     pub fn len(&self) -> usize {
         self.info.len()
     }
 
-    /// Points a full cell replaced ([`FullCell::EvictStalest`]) that are still in the index:
-    /// fewer than an eighth of [`Reference::len`] after every insertion. Matchers may pair
-    /// with them until the rebuild; the map's own merge rules ignore them.
+    /// Points a full cell replaced ([`FullCell::EvictStalest`]) or carving removed
+    /// ([`Merge::free_space_margin`]) that are still in the index: fewer than an eighth of
+    /// [`Reference::len`] after every insertion. Matchers may pair with replaced ones until
+    /// the rebuild (carved ones leave the searches at once); the map's own merge rules
+    /// ignore both.
     #[must_use]
     pub fn stale_len(&self) -> usize {
         self.stale
     }
 
-    /// Whether point `id` is live (not replaced by a full cell).
+    /// Whether point `id` is live (neither replaced by a full cell nor carved).
     #[must_use]
     pub fn is_live(&self, id: PointId) -> bool {
         self.live.get(id as usize).copied().unwrap_or(false)
     }
 
-    /// The live points (those no full cell replaced), in id order: the map as it stands.
+    /// The live points (those neither replaced nor carved), in id order: the map as it stands.
     #[must_use]
     pub fn live_points(&self) -> Vec<Point2<f64>> {
         let points = self.index.points();
@@ -407,6 +426,7 @@ impl<I: SpatialIndex> Reference<I> {
         self.confirmed.clear();
         self.live.clear();
         self.stale = 0;
+        self.looks.clear();
     }
 
     /// Inserts the points of `scan`, seen from `pose` (the laser's pose in the reference
@@ -434,6 +454,14 @@ impl<I: SpatialIndex> Reference<I> {
             .collect();
         for (k, p) in global.iter().enumerate() {
             crate::index::check_point(p, self.index.len() + k)?;
+        }
+        if let Some(merge) = merge
+            && merge.free_space_margin > 0.0
+            && merge.free_space_margin.is_finite()
+            && self.carve(scan, pose, merge)
+        {
+            // The index cannot take the carved points out of its searches itself.
+            self.rebuild()?;
         }
         let held = self.index.len();
         // This scan's number, for the points it inserts or confirms.
@@ -494,6 +522,7 @@ impl<I: SpatialIndex> Reference<I> {
             self.info.push(info);
             self.confirmed.push(stamp);
             self.live.push(true);
+            self.looks.push((1, 0));
             inserted += 1;
         }
         if self.stale > 0 && self.stale * STALE_SHARE >= self.info.len() {
@@ -517,6 +546,69 @@ impl<I: SpatialIndex> Reference<I> {
             .into_iter()
             .filter(|n| self.live[n.id as usize])
             .min_by(|a, b| a.dist_sq.total_cmp(&b.dist_sq).then(a.id.cmp(&b.id)))
+    }
+
+    /// Free-space carving ([`Merge::free_space_margin`]) with `scan` seen from `pose`: counts
+    /// the looks and misses of the live map points within the scan's reach, and takes those
+    /// missed too often out of the index's searches; they leave the index itself at the next
+    /// rebuild, as replaced points do. True when the index cannot remove points and must be
+    /// rebuilt now.
+    fn carve(&mut self, scan: &Scan, pose: &Pose2, merge: Merge) -> bool {
+        let margin = merge.free_space_margin;
+        let ranges = scan.ranges();
+        let status = scan.status();
+        let g = scan.geometry;
+        let reach = scan
+            .points()
+            .iter()
+            .map(|p| p.coords.norm())
+            .fold(0.0, f64::max)
+            .min(CARVE_REACH);
+        if ranges.len() < 2 || reach <= margin || g.angle_increment <= 0.0 {
+            return false;
+        }
+        let o = Point2::new(pose.x, pose.y);
+        let (s, c) = pose.theta.sin_cos();
+        let mut around = std::mem::take(&mut self.around);
+        self.index.within_radius(&o, reach, &mut around);
+        let last = (ranges.len() - 1) as f64;
+        let mut rebuild = false;
+        for n in &around {
+            let id = n.id as usize;
+            if !self.live[id] {
+                continue;
+            }
+            let d = n.point - o;
+            let (x, y) = (c * d.x + s * d.y, -s * d.x + c * d.y);
+            let f = (y.atan2(x) - g.angle_min) / g.angle_increment;
+            if !(0.0..last).contains(&f) {
+                continue;
+            }
+            let k = f as usize;
+            if status[k] != BeamStatus::Valid || status[k + 1] != BeamStatus::Valid {
+                continue;
+            }
+            let rho = n.dist_sq.sqrt();
+            let (a, b) = (ranges[k], ranges[k + 1]);
+            let looks = &mut self.looks[id];
+            if rho + margin < a.min(b) {
+                looks.1 = looks.1.saturating_add(1);
+                if looks.1 >= CARVE_MISSES && looks.1 > looks.0 {
+                    self.live[id] = false;
+                    self.stale += 1;
+                    if let Some(cell) = merge.cell(&n.point)
+                        && let Some(ids) = self.cells.get_mut(&cell)
+                    {
+                        ids.retain(|&other| other != n.id);
+                    }
+                    rebuild |= self.index.remove(n.id).is_none();
+                }
+            } else if (rho - a).abs() <= margin || (rho - b).abs() <= margin {
+                looks.0 = looks.0.saturating_add(1);
+            }
+        }
+        self.around = around;
+        rebuild
     }
 
     /// Whether cell `c` can take one more point under `merge`'s cap, replacing its stalest
@@ -562,10 +654,12 @@ impl<I: SpatialIndex> Reference<I> {
             id_of[old] = self.index.insert(*p)?;
             self.info[k] = self.info[old];
             self.confirmed[k] = self.confirmed[old];
+            self.looks[k] = self.looks[old];
             k += 1;
         }
         self.info.truncate(k);
         self.confirmed.truncate(k);
+        self.looks.truncate(k);
         self.live.clear();
         self.live.resize(k, true);
         self.stale = 0;
@@ -577,6 +671,13 @@ impl<I: SpatialIndex> Reference<I> {
         Ok(())
     }
 }
+
+/// Free-space carving looks at map points within this distance of the laser (m) at most: far
+/// beams are the ones whose bearing errors sweep farthest across the map.
+const CARVE_REACH: f64 = 10.0;
+/// A point leaves the map only once this many scans saw through it (and more than landed on
+/// it): one scan's odd beam (glass, a grazing edge) never carves.
+const CARVE_MISSES: u16 = 2;
 
 /// Replaced points are dropped from the index once they make up this share's inverse of it
 /// (an eighth): one rebuild of the map's live points per `len / 8` replacements.

@@ -78,6 +78,11 @@ pub struct Relevance {
     /// its own recent scans, not against its start. 0 keeps every relevant scan, as Alg. 1
     /// reads. Default 0.
     pub window_scans: usize,
+    /// Free-space carving ([`Merge::free_space_margin`], m): a map point that merged scans
+    /// see through (both beams around its bearing return from beyond it by more than this)
+    /// more often than they land on it, and at least twice, leaves the map. 0 (off) keeps
+    /// every point, as Alg. 1 reads. Default 0.
+    pub free_space_margin: f64,
 }
 
 /// Smallest and largest cell of the cell cap (m): cells finer than a millimetre would cap
@@ -102,6 +107,7 @@ impl Default for Relevance {
             max_cell_points: 0,
             full_cell: FullCell::EvictStalest,
             window_scans: 0,
+            free_space_margin: 0.0,
         }
     }
 }
@@ -126,6 +132,10 @@ impl Relevance {
             ));
         }
         non_negative("matcher.relevance.novelty_distance", self.novelty_distance)?;
+        non_negative(
+            "matcher.relevance.free_space_margin",
+            self.free_space_margin,
+        )?;
         if !(self.cell_size.is_finite()
             && (MIN_CELL_SIZE..=MAX_CELL_SIZE).contains(&self.cell_size))
         {
@@ -163,6 +173,7 @@ impl Relevance {
             max_cell_points: self.max_cell_points,
             full_cell: self.full_cell,
             surface_band: self.surface_band_sigmas.unwrap_or(matcher_band_sigmas) * range_sigma,
+            free_space_margin: self.free_space_margin,
         }
     }
 
@@ -313,11 +324,12 @@ pub trait Odometry: Send + std::fmt::Debug {
     /// Matches one record and updates the reference.
     fn process(&mut self, record: &Record) -> Estimate;
     /// Points held in the reference (the whole map for boosted pipelines): those the matcher
-    /// pairs with, including any a full cell replaced that the map has not dropped yet
-    /// ([`Reference::stale_len`]).
+    /// pairs with, and any a full cell replaced or free-space carving removed that the map
+    /// has not dropped yet ([`Reference::stale_len`]).
     fn reference_points(&self) -> &[Point2<f64>];
     /// The live points of the reference: [`Odometry::reference_points`] without those a full
-    /// cell replaced ([`qicp_core::FullCell::EvictStalest`]). The map as it stands.
+    /// cell replaced ([`qicp_core::FullCell::EvictStalest`]) or carving removed
+    /// ([`Relevance::free_space_margin`]). The map as it stands.
     fn live_points(&self) -> Vec<Point2<f64>> {
         self.reference_points().to_vec()
     }

@@ -23,6 +23,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("relevance.window_scans", Acts::Map),
     ("relevance.min_novelty", Acts::Map),
     ("relevance.novelty_distance", Acts::Map),
+    ("relevance.free_space_margin", Acts::Map),
     ("motion.sigma_xy_per_m", Acts::Any),
     ("motion.sigma_theta_per_m_deg", Acts::Any),
     ("motion.calibration_m", Acts::Map),

@@ -109,6 +109,10 @@ fn out_of_range_values_name_the_key() {
             "matcher.icp.max_dist_start",
         ),
         (
+            "[matcher.relevance]\nfree_space_margin = -0.1",
+            "matcher.relevance.free_space_margin",
+        ),
+        (
             "[matcher.icp]\nmax_dist_end = 5.0",
             "matcher.icp.max_dist_end",
         ),

@@ -206,6 +206,61 @@ impl<const B: usize> QuadTreeN<B> {
         self.root = root;
     }
 
+    /// [`SpatialIndex::remove`] of point `id` at `(x, y)`.
+    fn remove_point(&mut self, id: PointId, x: f64, y: f64) -> bool {
+        if self.nodes.is_empty() || !self.root.contains(x, y) {
+            return false;
+        }
+        let (mut n, mut cell) = (0usize, self.root);
+        while self.nodes[n].children != NONE {
+            let q = cell.quadrant(x, y);
+            n = (self.nodes[n].children + q) as usize;
+            cell = cell.child(q);
+        }
+        let mut leaf = self.nodes[n].leaf;
+        while leaf != NONE {
+            let base = leaf as usize * B;
+            let len = self.leaf_len[leaf as usize] as usize;
+            if let Some(s) =
+                (base..base + len).find(|&s| self.slot_x[s] == x && self.slot_y[s] == y)
+            {
+                let head = self.slot_id[s];
+                let mut chain = Vec::new();
+                self.for_each_duplicate(head, |d| chain.push(d));
+                let Some(k) = chain.iter().position(|&d| d == id) else {
+                    return false;
+                };
+                chain.swap_remove(k);
+                self.dup_next[id as usize] = NONE;
+                match chain.iter().min().copied() {
+                    Some(first) => {
+                        // The lowest id heads the chain; the rest follow in any order.
+                        self.slot_id[s] = first;
+                        let mut prev = first;
+                        for &d in chain.iter().filter(|&&d| d != first) {
+                            self.dup_next[prev as usize] = d;
+                            prev = d;
+                        }
+                        self.dup_next[prev as usize] = NONE;
+                    }
+                    None => {
+                        let last = base + len - 1;
+                        self.slot_x[s] = self.slot_x[last];
+                        self.slot_y[s] = self.slot_y[last];
+                        self.slot_id[s] = self.slot_id[last];
+                        self.slot_x[last] = f64::INFINITY;
+                        self.slot_y[last] = f64::INFINITY;
+                        self.slot_id[last] = NONE;
+                        self.leaf_len[leaf as usize] -= 1;
+                    }
+                }
+                return true;
+            }
+            leaf = self.leaf_next[leaf as usize];
+        }
+        false
+    }
+
     /// Turns leaf `n` (of cell `cell`) into an internal node and moves its points to four new
     /// leaves.
     fn split(&mut self, n: usize, cell: Cell) {
@@ -309,6 +364,16 @@ impl<const B: usize> SpatialIndex for QuadTreeN<B> {
             self.push_slot(extra, x, y, id);
             return Ok(id);
         }
+    }
+
+    /// The point's slot loses it (the bucket's last slot takes its place) or, when it heads a
+    /// chain of duplicates, passes to the lowest remaining id of the chain, so that ties are
+    /// still won by the lowest id, as in [`BruteForce`](crate::BruteForce).
+    fn remove(&mut self, id: PointId) -> Option<bool> {
+        let Some(&p) = self.points.get(id as usize) else {
+            return Some(false);
+        };
+        Some(self.remove_point(id, p.x, p.y))
     }
 
     fn clear(&mut self) {
