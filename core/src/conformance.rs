@@ -309,6 +309,7 @@ macro_rules! index_conformance {
             #[test] fn removal_uniform() { check_removal::<$index>(&uniform(3000, 50.0, 8), 8) }
             #[test] fn removal_laser_like() { check_removal::<$index>(&laser_scans(8_000, 9), 9) }
             #[test] fn removal_heavy_duplicates() { check_removal::<$index>(&duplicates(10), 10) }
+            #[test] fn removal_axis_aligned() { check_removal::<$index>(&axis_aligned_lines(), 12) }
             #[test] fn removal_tiny_clusters() { check_removal::<$index>(&uniform(2000, 1e-5, 11), 11) }
             #[test] fn bad_points() { refuses_bad_points::<$index>() }
             #[test] fn empty_and_single_point() { empty_and_single::<$index>() }

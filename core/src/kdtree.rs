@@ -87,6 +87,29 @@ impl SpatialIndex for KdTree {
         &self.points
     }
 
+    /// Out of the overflow list, or out of kiddo (whose coordinate counts then drop).
+    fn remove(&mut self, id: PointId) -> Option<bool> {
+        let Some(&p) = self.points.get(id as usize) else {
+            return Some(false);
+        };
+        if let Some(k) = self.overflow.iter().position(|&o| o == id) {
+            self.overflow.swap_remove(k);
+            return Some(true);
+        }
+        let removed = self
+            .tree
+            .as_mut()
+            .is_some_and(|t| t.remove(&[p.x, p.y], id) > 0);
+        if removed {
+            for (k, counts) in [key(p.x), key(p.y)].iter().zip(&mut self.axis_counts) {
+                if let Some(c) = counts.get_mut(k) {
+                    *c -= 1;
+                }
+            }
+        }
+        Some(removed)
+    }
+
     fn nearest_within(&self, q: &Point2<f64>, max_dist_sq: f64) -> Option<Neighbour> {
         if !(q.x.is_finite() && q.y.is_finite()) {
             return None;

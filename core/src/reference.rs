@@ -437,7 +437,9 @@ impl<I: SpatialIndex> Reference<I> {
     /// the nearest point already held (and that point's likewise), so a surface seen many times
     /// reports the finer sampling it now has; a new point closer than `merge.resolution` to one
     /// held is not inserted (0 keeps every point), nor one on a surface the map holds
-    /// ([`Merge::surface_band`]), nor one whose cell is full ([`Merge::max_cell_points`]). Returns the number of points inserted; on error nothing
+    /// ([`Merge::surface_band`]), nor one whose cell is full ([`Merge::max_cell_points`]).
+    /// Before its points enter, the scan carves the map points it sees through
+    /// ([`Merge::free_space_margin`]). Returns the number of points inserted; on error nothing
     /// is inserted.
     pub fn insert_scan(
         &mut self,

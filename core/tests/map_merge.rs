@@ -375,37 +375,59 @@ fn carving_keeps_every_point_of_a_room_seen_from_the_right_poses() {
     assert_eq!(carved.live_points(), plain.live_points());
 }
 
+/// An index that cannot remove points ([`SpatialIndex::remove`]'s default): the map must
+/// rebuild it to carve.
+#[derive(Debug, Default)]
+struct NoRemoval(BruteForce);
+
+impl SpatialIndex for NoRemoval {
+    fn insert(&mut self, p: Point2<f64>) -> Result<u32, qicp_core::IndexError> {
+        self.0.insert(p)
+    }
+    fn clear(&mut self) {
+        self.0.clear();
+    }
+    fn points(&self) -> &[Point2<f64>] {
+        self.0.points()
+    }
+    fn nearest_within(&self, q: &Point2<f64>, max: f64) -> Option<qicp_core::Neighbour> {
+        self.0.nearest_within(q, max)
+    }
+    fn within_radius(&self, q: &Point2<f64>, r: f64, out: &mut Vec<qicp_core::Neighbour>) {
+        self.0.within_radius(q, r, out);
+    }
+    fn k_nearest(&self, q: &Point2<f64>, k: usize, out: &mut Vec<qicp_core::Neighbour>) {
+        self.0.k_nearest(q, k, out);
+    }
+}
+
+/// The room mapped from ten poses, then one scan inserted 20° off its true heading (a wrong
+/// match), then thirty more from the right poses, all with carving.
+fn room_with_a_wrong_match<I: SpatialIndex>(index: I) -> Reference<I> {
+    let world = SyntheticWorld::room();
+    let mut map = Reference::new(index);
+    let mut insert = |scan: &Scan, pose: &Pose2| {
+        map.insert_scan(scan, pose, Some(carving()))
+            .expect("finite points");
+    };
+    for k in 0..10 {
+        let pose = tour(k);
+        insert(&world.scan(&pose, 0.005, k as u64 + 1), &pose);
+    }
+    let truth = tour(10);
+    let wrong = Pose2::new(truth.x, truth.y, truth.theta + 20f64.to_radians());
+    insert(&world.scan(&truth, 0.005, 11), &wrong);
+    for k in 11..40 {
+        let pose = tour(k);
+        insert(&world.scan(&pose, 0.005, k as u64 + 1), &pose);
+    }
+    map
+}
+
 #[test]
 fn a_wall_copied_in_by_a_wrong_match_is_carved_by_the_scans_after_it() {
     let world = SyntheticWorld::room();
-    for (name, index) in [("quad tree", true), ("kd-tree (rebuilt)", false)] {
-        let mut quad = Reference::new(QuadTree::default());
-        let mut kd = Reference::new(KdTree::default());
-        let mut insert = |scan: &Scan, pose: &Pose2| {
-            if index {
-                quad.insert_scan(scan, pose, Some(carving())).map(|_| ())
-            } else {
-                kd.insert_scan(scan, pose, Some(carving())).map(|_| ())
-            }
-            .expect("finite points");
-        };
-        for k in 0..10 {
-            let pose = tour(k);
-            insert(&world.scan(&pose, 0.005, k as u64 + 1), &pose);
-        }
-        // A match 20° off: the scan from tour(10) entered at the wrong heading.
-        let truth = tour(10);
-        let wrong = Pose2::new(truth.x, truth.y, truth.theta + 20f64.to_radians());
-        insert(&world.scan(&truth, 0.005, 11), &wrong);
-        for k in 11..40 {
-            let pose = tour(k);
-            insert(&world.scan(&pose, 0.005, k as u64 + 1), &pose);
-        }
-        let live = if index {
-            quad.live_points()
-        } else {
-            kd.live_points()
-        };
+    let check = |name: &str, live: Vec<Point2<f64>>, nearest: Option<qicp_core::Neighbour>| {
         let ghosts = live
             .iter()
             .filter(|p| distance_to_world(&world, p) > 0.1)
@@ -422,15 +444,30 @@ fn a_wall_copied_in_by_a_wrong_match_is_carved_by_the_scans_after_it() {
             inside, 0,
             "{name}: {ghosts} ghosts, {inside} inside the room"
         );
-        let searched = if index {
-            quad.index().nearest(&Point2::origin())
-        } else {
-            kd.index().nearest(&Point2::origin())
-        };
-        let nearest = searched.expect("a map").point;
+        let nearest = nearest.expect("a map").point;
         assert!(
             distance_to_world(&world, &nearest) < 0.1,
-            "{name}: a carved point still found: {nearest}"
+            "{name}: a carved point is still searched: {nearest}"
         );
-    }
+    };
+    let quad = room_with_a_wrong_match(QuadTree::default());
+    let kd = room_with_a_wrong_match(KdTree::default());
+    let rebuilt = room_with_a_wrong_match(NoRemoval::default());
+    check(
+        "quad tree",
+        quad.live_points(),
+        quad.index().nearest(&Point2::origin()),
+    );
+    check(
+        "kd-tree",
+        kd.live_points(),
+        kd.index().nearest(&Point2::origin()),
+    );
+    check(
+        "an index rebuilt",
+        rebuilt.live_points(),
+        rebuilt.index().nearest(&Point2::origin()),
+    );
+    assert_eq!(quad.live_points(), rebuilt.live_points(), "the same map");
+    assert_eq!(kd.live_points(), rebuilt.live_points(), "the same map");
 }
