@@ -86,6 +86,11 @@ pub struct Candidate {
 }
 
 /// A correlative matcher with its buffers (reused between searches).
+///
+/// The raster is laid out as a square of `side` cells about the prediction (`origin` its
+/// corner), large enough for the scan's reach and the window; only the rectangle of it that
+/// the search reads (`rect`) is held and drawn, since a cell's value depends on the reference
+/// points near it alone.
 #[derive(Debug, Clone, Default)]
 pub struct CorrelativeSearch {
     /// The window and raster.
@@ -93,10 +98,15 @@ pub struct CorrelativeSearch {
     raster: Vec<u8>,
     side: usize,
     origin: Point2<f64>,
+    /// The cells held: first column and row, width and height.
+    rect: (usize, usize, usize, usize),
     kernel: Vec<u8>,
     radius: usize,
     neighbours: Vec<Neighbour>,
+    /// The corner cells of every rotation's scan points, rotation after rotation.
     cells: Vec<(usize, usize)>,
+    /// Where each rotation's corner cells end in `cells`.
+    ends: Vec<usize>,
     sums: Vec<u32>,
 }
 
@@ -112,58 +122,68 @@ impl CorrelativeSearch {
 
     /// Olson Sec. III-A: the likelihood of a point is a Gaussian of its distance to the
     /// nearest reference point, here the largest of the Gaussians of the reference points
-    /// near it, quantized to a byte.
-    fn build_raster<I: SpatialIndex>(
-        &mut self,
-        reference: &Reference<I>,
-        centre: Point2<f64>,
-        reach: f64,
-    ) {
+    /// near it, quantized to a byte. Draws the held rectangle of the raster, from the
+    /// reference points with ids below `below` (every point with `None`).
+    fn draw_raster<I: SpatialIndex>(&mut self, reference: &Reference<I>, below: Option<u32>) {
         let res = self.params.resolution;
-        self.radius = (2.0 * self.params.sigma / res).ceil() as usize;
-        let r = self.radius as isize;
         let width = 2 * self.radius + 1;
-        self.kernel.clear();
-        for dy in -r..=r {
-            for dx in -r..=r {
-                let d2 = ((dx * dx + dy * dy) as f64) * res * res;
-                let s2 = self.params.sigma * self.params.sigma;
-                self.kernel
-                    .push((255.0 * (-0.5 * d2 / s2).exp()).round() as u8);
-            }
-        }
-        self.side = ((2.0 * reach / res).ceil() as usize + 1).min(MAX_CELLS);
-        let half = (self.side / 2) as f64 * res;
-        self.origin = Point2::new(centre.x - half, centre.y - half);
+        let (x0, y0, w, h) = self.rect;
         self.raster.clear();
-        self.raster.resize(self.side * self.side, 0);
-        reference.index().within_radius(
-            &centre,
-            half * std::f64::consts::SQRT_2,
-            &mut self.neighbours,
+        self.raster.resize(w * h, 0);
+        if w == 0 || h == 0 {
+            return;
+        }
+        // Every point whose kernel reaches the held cells lies within this disc.
+        let reach = |cells: usize| (cells as f64 / 2.0 + self.radius as f64 + 1.0) * res;
+        let centre = Point2::new(
+            self.origin.x + (x0 as f64 + (w - 1) as f64 / 2.0) * res,
+            self.origin.y + (y0 as f64 + (h - 1) as f64 / 2.0) * res,
         );
+        reference
+            .index()
+            .within_radius(&centre, reach(w).hypot(reach(h)), &mut self.neighbours);
+        let (x1, y1) = (x0 + w, y0 + h);
         for n in &self.neighbours {
+            if below.is_some_and(|b| n.id >= b) {
+                continue;
+            }
             let Some((cx, cy)) = self.cell(&n.point) else {
                 continue;
             };
-            if self.raster[cy * self.side + cx] == 255 {
+            if cx + self.radius < x0
+                || cy + self.radius < y0
+                || cx >= x1 + self.radius
+                || cy >= y1 + self.radius
+            {
+                continue; // its kernel misses the held cells
+            }
+            if (x0..x1).contains(&cx)
+                && (y0..y1).contains(&cy)
+                && self.raster[(cy - y0) * w + cx - x0] == 255
+            {
                 continue; // a point in this cell has been drawn already
             }
             for ky in 0..width {
                 let Some(y) = (cy + ky).checked_sub(self.radius) else {
                     continue;
                 };
-                if y >= self.side {
+                if y >= y1 {
                     break;
+                }
+                if y < y0 {
+                    continue;
                 }
                 for kx in 0..width {
                     let Some(x) = (cx + kx).checked_sub(self.radius) else {
                         continue;
                     };
-                    if x >= self.side {
+                    if x >= x1 {
                         break;
                     }
-                    let cell = &mut self.raster[y * self.side + x];
+                    if x < x0 {
+                        continue;
+                    }
+                    let cell = &mut self.raster[(y - y0) * w + x - x0];
                     *cell = (*cell).max(self.kernel[ky * width + kx]);
                 }
             }
@@ -188,30 +208,64 @@ impl CorrelativeSearch {
         local: &[Point2<f64>],
         guess: &Pose2,
     ) -> Option<Candidate> {
+        self.search_among(reference, local, guess, None)
+            .map(|(best, _)| best)
+    }
+
+    /// The rotations of the window about `guess`, from the prediction outwards (so that of
+    /// equal scores the nearest rotation wins): the step number and the heading.
+    fn rotations(&self, guess: &Pose2, turns: i64) -> impl Iterator<Item = (i64, f64)> {
+        let (step, theta) = (self.params.angle_step_deg, guess.theta);
+        std::iter::once(0)
+            .chain((1..=turns).flat_map(|k| [-k, k]))
+            .map(move |k| (k, theta + (k as f64 * step).to_radians()))
+    }
+
+    /// Lays the raster out around `guess`, large enough for the window and the scan's reach,
+    /// and finds the corner cells of every rotation's scan points (up to `turns` steps
+    /// either way) and the kernel: the window's translation steps either way, or `None` when
+    /// there is nothing to search.
+    fn layout<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        guess: &Pose2,
+        turns: i64,
+    ) -> Option<usize> {
         if local.is_empty() || reference.is_empty() || !guess.is_finite() {
             return None;
         }
         let p = self.params;
-        let steps = (p.window_xy / p.resolution).round() as usize;
+        let res = p.resolution;
+        self.radius = (2.0 * p.sigma / res).ceil() as usize;
+        let r = self.radius as isize;
+        self.kernel.clear();
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let d2 = ((dx * dx + dy * dy) as f64) * res * res;
+                let s2 = p.sigma * p.sigma;
+                self.kernel
+                    .push((255.0 * (-0.5 * d2 / s2).exp()).round() as u8);
+            }
+        }
         let reach_points = local
             .iter()
             .map(|q| q.coords.norm())
             .fold(0.0, f64::max)
-            .min(0.5 * MAX_CELLS as f64 * p.resolution);
-        let reach = reach_points + p.window_xy + 2.0 * p.sigma + p.resolution;
-        let centre = Point2::new(guess.x, guess.y);
-        self.build_raster(reference, centre, reach);
-        let span = 2 * steps + 1;
-        let turns = (p.window_deg / p.angle_step_deg).floor() as i64;
-        let mut best: Option<(u32, Pose2)> = None;
-        // From the prediction outwards, so that of equal scores the nearest rotation wins.
-        let order = std::iter::once(0).chain((1..=turns).flat_map(|k| [-k, k]));
-        for k in order {
-            let theta = guess.theta + (k as f64 * p.angle_step_deg).to_radians();
+            .min(0.5 * MAX_CELLS as f64 * res);
+        let reach = reach_points + p.window_xy + 2.0 * p.sigma + res;
+        self.side = ((2.0 * reach / res).ceil() as usize + 1).min(MAX_CELLS);
+        let half = (self.side / 2) as f64 * res;
+        self.origin = Point2::new(guess.x - half, guess.y - half);
+        let steps = (p.window_xy / res).round() as usize;
+        self.cells.clear();
+        self.ends.clear();
+        let rotations: Vec<f64> = self.rotations(guess, turns).map(|(_, t)| t).collect();
+        for theta in rotations {
             let at = Pose2::new(guess.x, guess.y, theta);
-            self.cells.clear();
             for q in local {
-                // Cells of the window's corner translation (-steps, -steps).
+                // Cells of the window's corner translation (-steps, -steps), where every
+                // translation of the window keeps the point on the raster.
                 if let Some((x, y)) = self.cell(&at.transform_point(q))
                     && x >= steps
                     && y >= steps
@@ -221,15 +275,76 @@ impl CorrelativeSearch {
                     self.cells.push((x - steps, y - steps));
                 }
             }
+            self.ends.push(self.cells.len());
+        }
+        Some(steps)
+    }
+
+    /// Lays the raster out (see [`layout`](Self::layout)) and draws the cells the search
+    /// reads from the reference points with ids below `below` (every point with `None`): the
+    /// window's translation steps either way, or `None` when there is nothing to search.
+    fn prepare<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        guess: &Pose2,
+        below: Option<u32>,
+        turns: i64,
+    ) -> Option<usize> {
+        let steps = self.layout(reference, local, guess, turns)?;
+        let span = 2 * steps + 1;
+        self.rect = match self
+            .cells
+            .iter()
+            .copied()
+            .reduce(|a, b| (a.0.min(b.0), a.1.min(b.1)))
+        {
+            None => (0, 0, 0, 0),
+            Some((x0, y0)) => {
+                let (x1, y1) = self
+                    .cells
+                    .iter()
+                    .fold((0, 0), |m, c| (m.0.max(c.0), m.1.max(c.1)));
+                (x0, y0, x1 + span - x0, y1 + span - y0)
+            }
+        };
+        self.draw_raster(reference, below);
+        Some(steps)
+    }
+
+    /// [`search`](Self::search) against the reference points with ids below `below` only
+    /// (every point with `None`: the points of the scans inserted before a given one), with
+    /// the score of `guess` itself in the same raster.
+    pub fn search_among<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        guess: &Pose2,
+        below: Option<u32>,
+    ) -> Option<(Candidate, f64)> {
+        let p = self.params;
+        let turns = (p.window_deg / p.angle_step_deg).floor() as i64;
+        let steps = self.prepare(reference, local, guess, below, turns)?;
+        let mut at_guess = 0u32;
+        let span = 2 * steps + 1;
+        let mut best: Option<(u32, Pose2)> = None;
+        let mut start = 0;
+        let rotations: Vec<(i64, f64)> = self.rotations(guess, turns).collect();
+        for ((k, theta), &end) in rotations.into_iter().zip(&self.ends) {
             self.sums.clear();
             self.sums.resize(span * span, 0);
-            for &(x, y) in &self.cells {
+            let (x0, y0, w, _) = self.rect;
+            for &(x, y) in &self.cells[start..end] {
                 for dy in 0..span {
-                    let row = &self.raster[(y + dy) * self.side + x..][..span];
+                    let row = &self.raster[(y + dy - y0) * w + x - x0..][..span];
                     for (sum, &v) in self.sums[dy * span..][..span].iter_mut().zip(row) {
                         *sum += u32::from(v);
                     }
                 }
+            }
+            start = end;
+            if k == 0 {
+                at_guess = self.sums[steps * span + steps];
             }
             // Of equal scores the translation nearest the prediction wins.
             let centre = steps as isize;
@@ -254,10 +369,63 @@ impl CorrelativeSearch {
             }
         }
         let (score, pose) = best?;
-        (score > 0).then(|| Candidate {
-            pose,
-            score: f64::from(score) / (255.0 * local.len() as f64),
+        let norm = 255.0 * local.len() as f64;
+        (score > 0).then(|| {
+            (
+                Candidate {
+                    pose,
+                    score: f64::from(score) / norm,
+                },
+                f64::from(at_guess) / norm,
+            )
         })
+    }
+
+    /// The score of `pose` alone, as [`search_among`](Self::search_among) scores its
+    /// `guess`, against the reference points with ids below `below`: the raster's value at
+    /// each scan point's cell, found from the points near that cell without drawing the
+    /// raster.
+    pub fn score_among<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+        below: u32,
+    ) -> Option<f64> {
+        let steps = self.layout(reference, local, pose, 0)?;
+        let res = self.params.resolution;
+        let r = self.radius;
+        let width = 2 * r + 1;
+        // Every point whose cell lies within `r` cells of a cell lies within this distance
+        // of the cell's centre.
+        let near = (r as f64 + 1.0) * res * std::f64::consts::SQRT_2;
+        let mut sum = 0u32;
+        for k in 0..self.cells.len() {
+            let (x, y) = (self.cells[k].0 + steps, self.cells[k].1 + steps);
+            let centre = Point2::new(
+                self.origin.x + x as f64 * res,
+                self.origin.y + y as f64 * res,
+            );
+            reference
+                .index()
+                .within_radius(&centre, near, &mut self.neighbours);
+            let mut value = 0u8;
+            for n in &self.neighbours {
+                if n.id >= below {
+                    continue;
+                }
+                // The kernel entry a point drawn at its cell (cx, cy) writes into (x, y).
+                if let Some((cx, cy)) = self.cell(&n.point)
+                    && let (Some(kx), Some(ky)) = ((x + r).checked_sub(cx), (y + r).checked_sub(cy))
+                    && kx < width
+                    && ky < width
+                {
+                    value = value.max(self.kernel[ky * width + kx]);
+                }
+            }
+            sum += u32::from(value);
+        }
+        Some(f64::from(sum) / (255.0 * local.len() as f64))
     }
 }
 
