@@ -235,31 +235,40 @@ fn sweep_refuses_relations_of_another_time_span() {
 
 /// Issue 12's robustness bounds, on the first 3,000 Intel scans where they hold for these
 /// variants (the whole log's sweep is in the README): every variant within
-/// max(2 × default, 5 cm), the median ratio at most 1.3, no relation of the default run
-/// above 0.5 m. Each list mixes input and parameter variants.
+/// max(2 × default, 5 cm), the median ratio at most 1.3. Each list mixes input and parameter
+/// variants. `max-range-10` failed for both matchers in every form measured until the
+/// matches were re-anchored on revisits (q-wsm 0.134-0.154 m here before, 0.021 m with it).
+/// No relation of q-wsm's default run lies above 0.5 m; q-idc's has one, 0.54 m, across
+/// its re-anchoring at 370 s, which corrects half a metre of drift at once (README, Known
+/// limits).
 #[test]
 fn sweep_bounds_hold_on_the_first_3000_intel_scans() {
-    for (kind, names) in [
+    for (kind, names, over_half_metre) in [
         (
             "q-wsm",
-            // max-range-10 held here before the surface band (0.134 m with it, over the bound);
             // scans/2 and relevance.surface_band_sigmas*1.4 held with the records sorted by
-            // time (0.171 and 0.084 m in file order, over the bound).
-            "beams/2,odom-noise,range-noise,relevance.tau_max*0.7,icp.max_dist_end*0.7,\
-             wsm.sigma_slide*0.7",
+            // time (0.171 and 0.084 m in file order before re-anchoring, over the bound).
+            "beams/2,odom-noise,range-noise,max-range-10,relevance.tau_max*0.7,\
+             icp.max_dist_end*0.7,wsm.sigma_slide*0.7",
+            0,
         ),
         (
             "q-idc",
             // beams/2 guards IDC's end window against a coarser laser (0.286 m when the
             // window stayed at 1° for 2° between beams).
-            "scans/2,beams/2,odom-noise,icp.max_dist_start*0.7,motion.sigma_xy_per_m*0.7,\
-             relevance.map_resolution*1.4",
+            "scans/2,beams/2,odom-noise,max-range-10,icp.max_dist_start*0.7,\
+             motion.sigma_xy_per_m*0.7,relevance.map_resolution*1.4",
+            1,
         ),
     ] {
         let (report, _) = sweep_kind_json(kind, &["--scans", "3000", "--variants", names]);
         let base = f(&report["default"]["trans_mean"]);
         assert!(base < 0.05, "{kind}: default {base}");
-        assert_eq!(report["relations_over_0_5_m"], 0, "{kind}: {report}");
+        assert_eq!(
+            report["relations_over_0_5_m"], over_half_metre,
+            "{kind}: {report}"
+        );
+        assert!(f(&report["default"]["trans_max"]) < 0.6, "{kind}: {report}");
         let bound = (2.0 * base).max(0.05);
         for v in report["variants"].as_array().expect("variants") {
             let t = f(&v["trans_mean"]);

@@ -74,6 +74,8 @@ pub struct MatcherFigures {
     pub refused: usize,
     /// Matches kept out of the map.
     pub withheld: usize,
+    /// Matches re-anchored to the old map on a revisit.
+    pub reanchored: usize,
     /// Wall time of the match loop (s).
     pub matching_seconds: f64,
 }
@@ -97,6 +99,7 @@ impl MatcherFigures {
             recovered: s.recovered,
             refused: s.refused,
             withheld: s.withheld,
+            reanchored: s.reanchored,
             matching_seconds: s.wall_seconds,
         }
     }

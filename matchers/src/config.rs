@@ -22,6 +22,7 @@ use crate::idc::Idc;
 use crate::params::{Param, Range, check_section, parse_section, to_table, typed_section};
 use crate::pipeline::{MotionModel, Odometry, Pipeline, Relevance};
 use crate::registry::{Assembly, ErasedAlgorithm, IndexEntry, ReferenceEntry, Registry};
+use crate::revisit::RevisitParams;
 use crate::validation::ValidationParams;
 use crate::wsm::Wsm;
 use qicp_core::{KdTree, LaserNoise, MutualNearest, QuadTree};
@@ -118,6 +119,8 @@ pub struct MatcherConfig {
     pub validation: ValidationParams,
     /// The correlative search that re-matches a suspect scan.
     pub correlative: CorrelativeParams,
+    /// The look-ups in the old map that re-anchor a match on a revisit.
+    pub revisit: RevisitParams,
     /// The laser's noise (`[matcher.laser]`): one sensor parameter for every algorithm, held
     /// by the reference ([`qicp_core::Reference::noise`]).
     pub laser: LaserNoise,
@@ -133,6 +136,7 @@ impl std::fmt::Debug for MatcherConfig {
             .field("motion", &self.motion)
             .field("validation", &self.validation)
             .field("correlative", &self.correlative)
+            .field("revisit", &self.revisit)
             .field("laser", &self.laser)
             .finish()
     }
@@ -149,17 +153,19 @@ impl PartialEq for MatcherConfig {
             && self.motion == other.motion
             && self.validation == other.validation
             && self.correlative == other.correlative
+            && self.revisit == other.revisit
             && self.laser == other.laser
     }
 }
 
 /// The sections every algorithm shares, with their keys below `[matcher]`.
-const COMMON_SECTIONS: [&str; 6] = [
+const COMMON_SECTIONS: [&str; 7] = [
     "icp",
     "relevance",
     "motion",
     "validation",
     "correlative",
+    "revisit",
     "laser",
 ];
 
@@ -381,6 +387,7 @@ impl MatcherConfig {
             motion: section(&mut table, "motion")?,
             validation: section(&mut table, "validation")?,
             correlative: section(&mut table, "correlative")?,
+            revisit: section(&mut table, "revisit")?,
             section: algorithm.effective(&own)?,
             algorithm,
             index,
@@ -465,6 +472,7 @@ impl MatcherConfig {
         self.motion.validate()?;
         self.validation.validate()?;
         self.correlative.validate()?;
+        self.revisit.validate()?;
         check_section("matcher.laser", &self.laser, LASER_PARAMETERS)?;
         Ok(())
     }
@@ -486,6 +494,7 @@ impl MatcherConfig {
         put("motion", to_table(&c.motion))?;
         put("validation", to_table(&c.validation))?;
         put("correlative", to_table(&c.correlative))?;
+        put("revisit", to_table(&c.revisit))?;
         put("laser", to_table(&c.laser))?;
         m.insert("algorithm".into(), c.algorithm.name().into());
         m.insert("reference".into(), c.reference.name().into());
@@ -525,6 +534,7 @@ impl MatcherConfig {
                 motion: c.motion,
                 validation: c.validation,
                 correlative: c.correlative,
+                revisit: c.revisit,
                 laser: c.laser,
                 index: &c.index,
             },

@@ -11,7 +11,9 @@
 //!   [`QIdc`], [`QWsm`], [`KdIdc`], [`KdWsm`];
 //! - around Alg. 1, each switchable: [`Validator`] checks a match before it enters the map
 //!   ([`validation`]), and [`CorrelativeSearch`] (Olson 2009) re-matches a suspect scan from the
-//!   best pose of a window around the prediction ([`correlative`]);
+//!   best pose of a window around the prediction ([`correlative`]), and [`Revisit`]
+//!   re-anchors a match to the old map when the robot comes back to ground it mapped long
+//!   before ([`revisit`]);
 //! - [`Registry`]: algorithms, indexes and reference policies by name, composed by a
 //!   [`MatcherConfig`] (from TOML or a name such as `"q-wsm"`) into a `Box<dyn Odometry>`.
 //!   Another crate adds its matcher with [`Registry::register`] (see `qicp-plicp`), its
@@ -45,6 +47,7 @@ pub mod params;
 pub mod pipeline;
 pub mod policy;
 pub mod registry;
+pub mod revisit;
 mod steering;
 pub mod validation;
 pub mod wsm;
@@ -59,5 +62,6 @@ pub use params::{Acts, Param, Range};
 pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance};
 pub use policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 pub use registry::{Algorithm, AnyIndex, IndexEntry, Metric, ReferenceEntry, Registry};
+pub use revisit::{Proposal, Revisit, RevisitParams};
 pub use validation::{Check, Fit, Level, ValidationParams, Validator};
 pub use wsm::{Wsm, WsmAlgorithm, WsmParams};

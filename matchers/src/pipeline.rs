@@ -6,6 +6,7 @@ use crate::calibration::OdometryCalibration;
 use crate::correlative::{CorrelativeParams, CorrelativeSearch};
 use crate::icp::non_negative;
 use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
+use crate::revisit::{Revisit, RevisitParams};
 use crate::validation::{Check, Fit, ValidationParams, Validator, is_poor};
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
@@ -405,6 +406,8 @@ pub struct Pipeline<M, I> {
     run: Option<OdometryRun>,
     /// The check before insertion, and its search.
     validator: Validator,
+    /// The look-ups in the old map that re-anchor a match on a revisit.
+    revisit: Revisit,
     search: CorrelativeSearch,
     /// Odometry's scale and drift, fitted to the accepted matches.
     calibration: OdometryCalibration,
@@ -413,7 +416,8 @@ pub struct Pipeline<M, I> {
 impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// A pipeline named `kind` (for reports), with the defaults of the TOML registry: the
     /// odometry prior of [`MotionModel::default`], the checks of
-    /// [`ValidationParams::default`] and [`CorrelativeParams::default`], and the matcher's own
+    /// [`ValidationParams::default`] and [`CorrelativeParams::default`], the re-anchoring of
+    /// [`RevisitParams::default`], and the matcher's own
     /// map resolution and surface band where `policy` leaves them unset. `noise` is the laser's
     /// (`[matcher.laser]` in TOML), held by the reference for every matcher. `Pipeline::new(..)` with default
     /// parameters and `Registry::config(name)?.build()` give the same poses.
@@ -435,6 +439,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             run: None,
             validator: Validator::new(ValidationParams::default()),
             search: CorrelativeSearch::new(CorrelativeParams::default()),
+            revisit: Revisit::new(RevisitParams::default()),
             calibration: OdometryCalibration::default(),
         }
         .with_motion_model(MotionModel::default())
@@ -449,6 +454,13 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     ) -> Self {
         self.validator = Validator::new(validation);
         self.search = CorrelativeSearch::new(correlative);
+        self
+    }
+
+    /// Re-anchors matches to the old map on a revisit as `revisit` says ([`crate::revisit`]).
+    #[must_use]
+    pub fn with_revisit(mut self, revisit: RevisitParams) -> Self {
+        self.revisit = Revisit::new(revisit);
         self
     }
 
@@ -537,6 +549,27 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         (result, check)
     }
 
+    /// Looks the matched scan up in the old map ([`crate::revisit`]) and re-anchors the match
+    /// there when the old map explains it much better nearby: true when it did.
+    fn reanchor(&mut self, scan: &qicp_core::Scan, result: &mut MatchResult) -> bool {
+        let local = scan.points();
+        let Some(proposal) = self.revisit.propose(&self.reference, local, &result.pose) else {
+            return false;
+        };
+        let again = self
+            .matcher
+            .match_with_prior(&self.reference, scan, proposal.start, None);
+        if again.fallback.is_some()
+            || !self
+                .revisit
+                .confirms(&self.reference, local, &again.pose, &proposal)
+        {
+            return false;
+        }
+        *result = again;
+        true
+    }
+
     fn update_reference(&mut self, record: &Record, laser: &Pose2, result: &MatchResult) -> bool {
         let matched = Matched {
             scan: &record.scan,
@@ -594,15 +627,21 @@ where
         let guess = self.reference_frame.between(&predicted);
         // The prior's x-y block is isotropic, so it holds in the reference frame unrotated.
         let prior = self.motion.information(&step);
-        let (result, mut check) = self.match_checked(&record.scan, guess, prior);
+        let (mut result, mut check) = self.match_checked(&record.scan, guess, prior);
         let boosted = self.policy.is_map();
+        // On a revisit the match may be re-anchored to the old map: a correction of drift,
+        // which odometry's veto must not take back.
+        check.reanchored = boosted
+            && self.validator.params.enabled
+            && result.fallback.is_none()
+            && self.reanchor(&record.scan, &mut result);
         // A refused match stays out of a map, and so does one that odometry contradicts
         // until a match agrees again. A scan-to-scan reference is replaced all the same: there
         // is no map to protect, and an older reference overlaps less.
-        let contradicted = result.fallback.is_none()
+        let contradicted = !check.reanchored
+            && result.fallback.is_none()
             && prior.is_some_and(|lambda| self.validator.disagrees(&lambda, &guess, &result.pose));
         check.withheld = boosted && contradicted;
-        let mut result = result;
         // Odometry says the match moved where the robot did not; where the scan cannot tell
         // the two apart, odometry's pose stands, as after a refusal.
         if check.withheld
@@ -617,6 +656,9 @@ where
         let laser = self.reference_frame * result.pose;
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
+        if inserted && boosted {
+            self.revisit.inserted(self.reference.index().len());
+        }
         if let Some(before) = base
             && result.fallback.is_none()
             && !check.refused

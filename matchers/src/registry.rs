@@ -25,6 +25,7 @@ use crate::params::{Param, check_section, parse_section, to_table};
 use crate::pipeline::{MotionModel, Odometry, Pipeline, Relevance};
 pub use crate::policy::{MAP, ReferenceEntry, SCAN};
 use crate::policy::{ReferencePolicy, is_builtin};
+use crate::revisit::RevisitParams;
 use crate::validation::ValidationParams;
 use qicp_core::{
     BruteForce, CorrespondenceMetric, KdTree, LaserNoise, MutualNearest, QuadTree, ScanMatcher,
@@ -189,6 +190,7 @@ pub(crate) struct Assembly<'a> {
     pub motion: MotionModel,
     pub validation: ValidationParams,
     pub correlative: CorrelativeParams,
+    pub revisit: RevisitParams,
     pub laser: LaserNoise,
     pub index: &'a IndexEntry,
 }
@@ -232,7 +234,8 @@ where
     Box::new(
         Pipeline::new(with.kind, matcher, index, with.policy, noise)
             .with_motion_model(with.motion)
-            .with_validation(with.validation, with.correlative),
+            .with_validation(with.validation, with.correlative)
+            .with_revisit(with.revisit),
     )
 }
 

@@ -34,6 +34,12 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("validation.max_odometry_chi2", Acts::Any),
     ("correlative.window_xy", Acts::Any),
     ("correlative.window_deg", Acts::Any),
+    ("revisit.age_scans", Acts::Map),
+    ("revisit.every", Acts::Map),
+    ("revisit.max_miss", Acts::Map),
+    ("revisit.min_gain", Acts::Map),
+    ("revisit.window_xy", Acts::Map),
+    ("revisit.window_deg", Acts::Map),
 ];
 
 /// Steering parameters that act only through another one: each is left out of the sweep

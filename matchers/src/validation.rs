@@ -169,6 +169,8 @@ pub struct Check {
     /// ([`ValidationParams::max_odometry_chi2`]): its pose is reported, but it does not
     /// enter a map.
     pub withheld: bool,
+    /// The match was re-anchored to the old map on a revisit ([`crate::revisit`]).
+    pub reanchored: bool,
 }
 
 impl Check {
@@ -179,6 +181,7 @@ impl Check {
         recovered: false,
         refused: false,
         withheld: false,
+        reanchored: false,
     };
 }
 

@@ -75,6 +75,8 @@ pub struct MatchSummary {
     pub refused: usize,
     /// Matches that odometry contradicted: reported, but kept out of the map.
     pub withheld: usize,
+    /// Matches re-anchored to the old map on a revisit.
+    pub reanchored: usize,
 }
 
 impl MatchSummary {
@@ -154,6 +156,7 @@ struct RunTotals {
     recovered: usize,
     refused: usize,
     withheld: usize,
+    reanchored: usize,
 }
 
 impl RunTotals {
@@ -185,6 +188,7 @@ impl RunTotals {
         self.recovered += usize::from(r.check.recovered);
         self.refused += usize::from(r.check.refused);
         self.withheld += usize::from(r.check.withheld);
+        self.reanchored += usize::from(r.check.reanchored);
     }
 
     fn summary(&self, matcher: &str, busy: std::time::Duration, map_points: usize) -> MatchSummary {
@@ -206,6 +210,7 @@ impl RunTotals {
             recovered: self.recovered,
             refused: self.refused,
             withheld: self.withheld,
+            reanchored: self.reanchored,
         }
     }
 }
@@ -359,19 +364,21 @@ pub fn run_matcher(
     Ok(matching.finish())
 }
 
-/// The `check` column of `matches.csv`: `refused`, `recovered`, `searched`, `withheld` or
-/// empty.
+/// The `check` column of `matches.csv`: `refused`, `reanchored`, `recovered`, `searched`,
+/// `withheld` or empty.
 fn check_label(check: &Check) -> &'static str {
     match (
         check.refused,
+        check.reanchored,
         check.recovered,
         check.searched,
         check.withheld,
     ) {
-        (true, _, _, _) => "refused",
-        (false, true, _, _) => "recovered",
-        (false, false, true, _) => "searched",
-        (false, false, false, true) => "withheld",
+        (true, ..) => "refused",
+        (false, true, ..) => "reanchored",
+        (false, false, true, ..) => "recovered",
+        (false, false, false, true, _) => "searched",
+        (false, false, false, false, true) => "withheld",
         _ => "",
     }
 }

@@ -1,0 +1,221 @@
+//! Re-anchoring on a revisit. A boosted map is laid by the scans themselves: while the robot
+//! explores, each scan is matched against the points the scans just before it inserted, so
+//! the map drifts with the estimate. When the robot comes back to ground it mapped long ago
+//! with more drift than ICP's gate pulls in, its scans still fit the recent points they
+//! overlap, every check passes, and a second copy of the old walls is laid beside the first;
+//! the old map is never matched again. (On the Intel log, every relation a failing sweep
+//! variant gets wrong by more than 0.5 m pairs a pose of the first minutes with one of a
+//! revisit.)
+//!
+//! Every `every`-th matched scan is therefore looked up in the old map alone, the points of
+//! the scans inserted at least `age_scans` relevant scans ago: a correlative search
+//! ([`crate::correlative`]) over a window around the match, in a raster of the old points
+//! only. Where some pose of the window explains the scan in the old map well (a score of at
+//! least 1 − `max_miss`) and by `min_gain` better than the match does, ICP is run again from
+//! that pose against the whole map, without the odometry prior, and its result replaces the
+//! match if the old map still explains it as well. The re-anchored match is not withheld by
+//! odometry's veto: it corrects drift that odometry cannot see.
+//!
+//! This is a local correction, not a loop closure: the drifted stretch of map stays where it
+//! was laid, and the estimate jumps by the drift. It helps where the drift is small enough to
+//! be found in the window (`window_xy`, `window_deg`) and the old map is unambiguous there.
+
+use crate::ConfigError;
+use crate::correlative::{CorrelativeParams, CorrelativeSearch};
+use crate::icp::positive;
+use qicp_core::{Point2, Pose2, Reference, SpatialIndex};
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+/// When and how far a match is re-anchored to the old map (TOML section `[matcher.revisit]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RevisitParams {
+    /// Look for the old map at all; false never re-anchors. Default true. Acts only against
+    /// a map, and only where `[matcher.validation] enabled` is true.
+    pub enabled: bool,
+    /// How old a map point must be to count as the old map, in relevant scans: a point is
+    /// old once `age_scans` − 1 scans have entered the map after the one that brought it.
+    /// Default 100: on the Freiburg logs 25-50 m of driving, well beyond the stretch a scan
+    /// overlaps while exploring.
+    pub age_scans: usize,
+    /// Every this many matched scans one is looked up in the old map. Default 5. A cost
+    /// knob: each look builds a raster of the old map around the scan.
+    pub every: usize,
+    /// At the re-anchored pose the old map leaves at most this share of the scan unexplained
+    /// (one minus the correlative score, from 0, every point on an old point, to 1). Default
+    /// 0.2.
+    pub max_miss: f64,
+    /// The re-anchored pose explains the scan in the old map by at least this much (of the
+    /// correlative score) better than the match. Default 0.2.
+    pub min_gain: f64,
+    /// Half-width of the translation window around the match (m). Default 1.0: the drift
+    /// beyond ICP's first gate that a revisit should still pull in.
+    pub window_xy: f64,
+    /// Half-width of the rotation window (deg). Default 3: a heading error larger than this
+    /// over a loop leaves the old map too far off for a local correction to be trusted.
+    pub window_deg: f64,
+}
+
+impl Default for RevisitParams {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            age_scans: 100,
+            every: 5,
+            max_miss: 0.2,
+            min_gain: 0.2,
+            window_xy: 1.0,
+            window_deg: 3.0,
+        }
+    }
+}
+
+/// The refined match must explain the scan in the old map within this much of the
+/// correlative pose's score: ICP against the whole map may pull it back onto the recent copy.
+const KEEP_SCORE: f64 = 0.05;
+
+impl RevisitParams {
+    /// Checks every value; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !(1..=1_000_000).contains(&self.age_scans) {
+            return Err(ConfigError::invalid(
+                "matcher.revisit.age_scans",
+                format!("{} must be in 1..=1000000", self.age_scans),
+            ));
+        }
+        if !(1..=1_000_000).contains(&self.every) {
+            return Err(ConfigError::invalid(
+                "matcher.revisit.every",
+                format!("{} must be in 1..=1000000", self.every),
+            ));
+        }
+        for (key, v) in [
+            ("matcher.revisit.max_miss", self.max_miss),
+            ("matcher.revisit.min_gain", self.min_gain),
+        ] {
+            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                return Err(ConfigError::invalid(key, format!("{v} must be in [0, 1]")));
+            }
+        }
+        self.search().validate().map_err(|e| {
+            // The window's keys are this section's.
+            match e {
+                ConfigError::Invalid { key, why } => ConfigError::Invalid {
+                    key: key.replace("matcher.correlative", "matcher.revisit"),
+                    why,
+                },
+                other => other,
+            }
+        })?;
+        positive("matcher.revisit.window_xy", self.window_xy)?;
+        positive("matcher.revisit.window_deg", self.window_deg)
+    }
+
+    /// The correlative search over this window, at the default raster.
+    fn search(&self) -> CorrelativeParams {
+        CorrelativeParams {
+            window_xy: self.window_xy,
+            window_deg: self.window_deg,
+            ..CorrelativeParams::default()
+        }
+    }
+}
+
+/// A start in the old map for a match to be tried from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Proposal {
+    /// The pose of the window that explains the scan best in the old map.
+    pub start: Pose2,
+    /// Its correlative score in the old map.
+    pub score: f64,
+    /// Points with ids below this are the old map.
+    below: u32,
+}
+
+/// The state of the look-ups: the map's size after each recent insertion, and a count of the
+/// matched scans.
+#[derive(Debug, Clone, Default)]
+pub struct Revisit {
+    /// The parameters.
+    pub params: RevisitParams,
+    search: CorrelativeSearch,
+    /// The map's length after each of the newest `age_scans` + 1 insertions.
+    sizes: VecDeque<usize>,
+    matched: usize,
+}
+
+impl Revisit {
+    /// Look-ups with the given parameters.
+    #[must_use]
+    pub fn new(params: RevisitParams) -> Self {
+        Self {
+            params,
+            search: CorrelativeSearch::new(params.search()),
+            sizes: VecDeque::new(),
+            matched: 0,
+        }
+    }
+
+    /// Notes that a scan entered the map, which now holds `len` points. A map that holds
+    /// fewer than before was rebuilt (a windowed map), its ids given anew: its age starts
+    /// afresh.
+    pub fn inserted(&mut self, len: usize) {
+        if self.sizes.back().is_some_and(|&last| len < last) {
+            self.sizes.clear();
+        }
+        self.sizes.push_back(len);
+        while self.sizes.len() > self.params.age_scans + 1 {
+            self.sizes.pop_front();
+        }
+    }
+
+    /// For a matched scan (`local`, matched at `pose`): a start in the old map when this scan
+    /// is due for a look-up and the old map explains it much better elsewhere in the window.
+    pub fn propose<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+    ) -> Option<Proposal> {
+        if !self.params.enabled {
+            return None;
+        }
+        self.matched += 1;
+        if self.matched % self.params.every != 0 || self.sizes.len() <= self.params.age_scans {
+            return None;
+        }
+        // The map's length after the insertion `age_scans` insertions ago: the points of the
+        // insertions since are recent.
+        let below = u32::try_from(self.sizes[1]).ok()?;
+        // Where the old map explains the match nearly whole, no pose can gain `min_gain` on it
+        // (scores are at most 1): the usual case, answered without drawing the raster.
+        let here = self.search.score_among(reference, local, pose, below)?;
+        if here + self.params.min_gain > 1.0 {
+            return None;
+        }
+        let (best, _) = self
+            .search
+            .search_among(reference, local, pose, Some(below))?;
+        (best.score >= 1.0 - self.params.max_miss && best.score >= here + self.params.min_gain)
+            .then_some(Proposal {
+                start: best.pose,
+                score: best.score,
+                below,
+            })
+    }
+
+    /// Whether a match refined from `proposal` still explains the scan in the old map as
+    /// well as the proposal did.
+    pub fn confirms<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        refined: &Pose2,
+        proposal: &Proposal,
+    ) -> bool {
+        self.search
+            .score_among(reference, local, refined, proposal.below)
+            .is_some_and(|s| s >= proposal.score - KEEP_SCORE)
+    }
+}

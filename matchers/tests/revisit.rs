@@ -1,0 +1,133 @@
+//! Re-anchoring on a revisit, on a room whose map holds an old copy and a drifted recent one:
+//! a match that fits the recent copy is moved back onto the old one, and a map without drift
+//! is left alone.
+
+use qicp_core::testdata::SyntheticWorld;
+use qicp_core::{MutualNearest, Pose2, QuadTree, Reference, ScanMatcher, SpatialIndex};
+use qicp_matchers::{IcpParams, Registry, Revisit, RevisitParams, Wsm, WsmParams};
+
+/// Where the robot sees the room from at scan `k`.
+fn pose(k: usize) -> Pose2 {
+    Pose2::new(
+        -1.5 + 0.2 * k as f64,
+        -0.5 + 0.05 * k as f64,
+        0.1 * k as f64,
+    )
+}
+
+/// A map of the room: four scans laid at their true poses (the old map), then `recent` scans
+/// laid `drift` off (what a robot lays that comes back with that much drift), the look-ups
+/// told of each insertion.
+fn map(drift: Pose2, recent: usize, revisit: &mut Revisit) -> Reference<QuadTree> {
+    let room = SyntheticWorld::room();
+    let mut reference = Reference::new(QuadTree::default());
+    for k in 0..OLD + recent {
+        let scan = room.scan(&pose(k % OLD), 0.005, k as u64 + 1);
+        let laid = if k < OLD {
+            pose(k)
+        } else {
+            drift * pose(k % OLD)
+        };
+        reference.insert_scan(&scan, &laid, None).expect("finite");
+        revisit.inserted(reference.index().len());
+    }
+    reference
+}
+
+/// Scans of the old map.
+const OLD: usize = 4;
+
+/// Look-ups at every scan, for which the newest three insertions are recent.
+fn look_ups() -> Revisit {
+    Revisit::new(RevisitParams {
+        age_scans: 4,
+        every: 1,
+        ..RevisitParams::default()
+    })
+}
+
+#[test]
+fn a_match_on_a_drifted_copy_of_the_room_is_reanchored_to_the_old_map() {
+    let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
+    let mut revisit = look_ups();
+    let reference = map(drift, 3, &mut revisit);
+    let truth = pose(4);
+    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
+    // The match a boosted matcher makes: the scan fits the recent copy, drift off.
+    let drifted = drift * truth;
+    let proposal = revisit
+        .propose(&reference, scan.points(), &drifted)
+        .expect("the old map explains the scan far better near the truth");
+    assert!(
+        proposal.start.distance(&truth) < 0.08,
+        "{:?} against {truth:?}",
+        proposal.start
+    );
+    // ICP from there, against the whole map, lands on the old copy and is confirmed.
+    let mut wsm = Wsm::<MutualNearest<QuadTree>>::new(IcpParams::default(), WsmParams::default());
+    let again = wsm.match_with_prior(&reference, &scan, proposal.start, None);
+    assert!(again.fallback.is_none(), "{again:?}");
+    assert!(
+        again.pose.distance(&truth) < 0.03,
+        "{:?} against {truth:?}",
+        again.pose
+    );
+    assert!(revisit.confirms(&reference, scan.points(), &again.pose, &proposal));
+    // The drifted pose itself is not confirmed in the old map.
+    assert!(!revisit.confirms(&reference, scan.points(), &drifted, &proposal));
+}
+
+#[test]
+fn a_map_without_drift_is_left_alone() {
+    let mut revisit = look_ups();
+    let reference = map(Pose2::IDENTITY, 3, &mut revisit);
+    let truth = pose(4);
+    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
+    assert_eq!(revisit.propose(&reference, scan.points(), &truth), None);
+}
+
+#[test]
+fn a_map_younger_than_its_age_is_not_looked_up() {
+    let drift = Pose2::new(0.45, -0.3, 0.0);
+    let mut revisit = look_ups();
+    // Without the recent copy, the map's scans are too few to be old at an age of four.
+    let reference = map(drift, 0, &mut revisit);
+    let truth = pose(4);
+    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
+    assert_eq!(
+        revisit.propose(&reference, scan.points(), &(drift * truth)),
+        None
+    );
+    // Switched off, a map old enough is not looked up either.
+    let mut off = Revisit::new(RevisitParams {
+        enabled: false,
+        ..look_ups().params
+    });
+    let reference = map(drift, 3, &mut off);
+    assert_eq!(
+        off.propose(&reference, scan.points(), &(drift * truth)),
+        None
+    );
+}
+
+#[test]
+fn revisit_values_out_of_range_are_refused_with_their_key() {
+    for (key, value) in [
+        ("max_miss", "1.5"),
+        ("min_gain", "-0.1"),
+        ("window_xy", "0"),
+        ("window_deg", "200"),
+        ("age_scans", "0"),
+        ("every", "0"),
+    ] {
+        let text = format!("[matcher]\nkind = \"q-wsm\"\n[matcher.revisit]\n{key} = {value}\n");
+        let err = Registry::builtin()
+            .parse(&text)
+            .and_then(|c| c.build().map(|_| ()))
+            .expect_err(key);
+        assert!(
+            err.to_string().contains(&format!("matcher.revisit.{key}")),
+            "{key}: {err}"
+        );
+    }
+}
