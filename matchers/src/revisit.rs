@@ -22,7 +22,6 @@
 
 use crate::ConfigError;
 use crate::correlative::{CorrelativeParams, CorrelativeSearch};
-use crate::icp::positive;
 use qicp_core::{Point2, Pose2, Reference, SpatialIndex};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -98,18 +97,14 @@ impl RevisitParams {
                 return Err(ConfigError::invalid(key, format!("{v} must be in [0, 1]")));
             }
         }
-        self.search().validate().map_err(|e| {
-            // The window's keys are this section's.
-            match e {
-                ConfigError::Invalid { key, why } => ConfigError::Invalid {
-                    key: key.replace("matcher.correlative", "matcher.revisit"),
-                    why,
-                },
-                other => other,
-            }
-        })?;
-        positive("matcher.revisit.window_xy", self.window_xy)?;
-        positive("matcher.revisit.window_deg", self.window_deg)
+        // The window is checked as a correlative search's, under this section's keys.
+        self.search().validate().map_err(|e| match e {
+            ConfigError::Invalid { key, why } => ConfigError::Invalid {
+                key: key.replace("matcher.correlative", "matcher.revisit"),
+                why,
+            },
+            other => other,
+        })
     }
 
     /// The correlative search over this window, at the default raster.
