@@ -180,8 +180,8 @@ impl Revisit {
         if self.matched % self.params.every != 0 || self.sizes.len() <= self.params.age_scans {
             return None;
         }
-        // The map's length after the insertion `age_scans` insertions ago: the points of the
-        // insertions since are recent.
+        // The map's length `age_scans` − 1 insertions before the newest: the points of the
+        // insertions since are recent (see `age_scans`).
         let below = u32::try_from(self.sizes[1]).ok()?;
         // Where the old map explains the match nearly whole, no pose can gain `min_gain` on it
         // (scores are at most 1): the usual case, answered without drawing the raster.
