@@ -212,10 +212,10 @@ impl CorrelativeSearch {
             .map(|(best, _)| best)
     }
 
-    /// The rotations of the window about `guess`, from the prediction outwards (so that of
-    /// equal scores the nearest rotation wins): the step number and the heading.
-    fn rotations(&self, guess: &Pose2, turns: i64) -> impl Iterator<Item = (i64, f64)> {
-        let (step, theta) = (self.params.angle_step_deg, guess.theta);
+    /// The rotations of a window of `turns` steps of `step` degrees about `theta`, from the
+    /// prediction outwards (so that of equal scores the nearest rotation wins): the step
+    /// number and the heading.
+    fn rotations(step: f64, theta: f64, turns: i64) -> impl Iterator<Item = (i64, f64)> {
         std::iter::once(0)
             .chain((1..=turns).flat_map(|k| [-k, k]))
             .map(move |k| (k, theta + (k as f64 * step).to_radians()))
@@ -260,8 +260,7 @@ impl CorrelativeSearch {
         let steps = (p.window_xy / res).round() as usize;
         self.cells.clear();
         self.ends.clear();
-        let rotations: Vec<f64> = self.rotations(guess, turns).map(|(_, t)| t).collect();
-        for theta in rotations {
+        for (_, theta) in Self::rotations(p.angle_step_deg, guess.theta, turns) {
             let at = Pose2::new(guess.x, guess.y, theta);
             for q in local {
                 // Cells of the window's corner translation (-steps, -steps), where every
@@ -329,8 +328,8 @@ impl CorrelativeSearch {
         let span = 2 * steps + 1;
         let mut best: Option<(u32, Pose2)> = None;
         let mut start = 0;
-        let rotations: Vec<(i64, f64)> = self.rotations(guess, turns).collect();
-        for ((k, theta), &end) in rotations.into_iter().zip(&self.ends) {
+        for (r, (k, theta)) in Self::rotations(p.angle_step_deg, guess.theta, turns).enumerate() {
+            let end = self.ends[r];
             self.sums.clear();
             self.sums.resize(span * span, 0);
             let (x0, y0, w, _) = self.rect;

@@ -132,8 +132,7 @@ pub struct Proposal {
 /// matched scans.
 #[derive(Debug, Clone, Default)]
 pub struct Revisit {
-    /// The parameters.
-    pub params: RevisitParams,
+    params: RevisitParams,
     search: CorrelativeSearch,
     /// The map's length after each of the newest `age_scans` + 1 insertions.
     sizes: VecDeque<usize>,
@@ -150,6 +149,12 @@ impl Revisit {
             sizes: VecDeque::new(),
             matched: 0,
         }
+    }
+
+    /// The parameters (the search's window was built from them).
+    #[must_use]
+    pub fn params(&self) -> &RevisitParams {
+        &self.params
     }
 
     /// Notes that a scan entered the map, which now holds `len` points. A map that holds

@@ -101,7 +101,7 @@ fn a_map_younger_than_its_age_is_not_looked_up() {
     // Switched off, a map old enough is not looked up either.
     let mut off = Revisit::new(RevisitParams {
         enabled: false,
-        ..look_ups().params
+        ..*look_ups().params()
     });
     let reference = map(drift, 3, &mut off);
     assert_eq!(
