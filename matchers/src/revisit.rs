@@ -194,15 +194,15 @@ impl Revisit {
         if here + self.params.min_gain > 1.0 {
             return None;
         }
-        let (best, _) = self
+        let min_score = (1.0 - self.params.max_miss).max(here + self.params.min_gain);
+        let best = self
             .search
-            .search_among(reference, local, pose, Some(below))?;
-        (best.score >= 1.0 - self.params.max_miss && best.score >= here + self.params.min_gain)
-            .then_some(Proposal {
-                start: best.pose,
-                score: best.score,
-                below,
-            })
+            .search_over(reference, local, pose, Some(below), min_score)?;
+        Some(Proposal {
+            start: best.pose,
+            score: best.score,
+            below,
+        })
     }
 
     /// Whether a match refined from `proposal` still explains the scan in the old map as
