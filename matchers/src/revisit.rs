@@ -182,7 +182,9 @@ impl Revisit {
             return None;
         }
         self.matched += 1;
-        if self.matched % self.params.every != 0 || self.sizes.len() <= self.params.age_scans {
+        if !self.matched.is_multiple_of(self.params.every)
+            || self.sizes.len() <= self.params.age_scans
+        {
             return None;
         }
         // The map's length `age_scans` − 1 insertions before the newest: the points of the
