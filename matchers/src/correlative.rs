@@ -38,6 +38,10 @@ impl Default for CorrelativeParams {
     }
 }
 
+/// Radius of a disc about a cell's centre that holds every point of the cell (half its
+/// diagonal, 0.71, and a margin), in cells.
+const CELL_DISC: f64 = 0.75;
+
 /// The raster grows to at most this many cells a side; points beyond it are not scored.
 const MAX_CELLS: usize = 4096;
 
@@ -517,6 +521,20 @@ impl CorrelativeSearch {
                 self.origin.x + x as f64 * res,
                 self.origin.y + y as f64 * res,
             );
+            // An old point in the cell itself gives the kernel's peak, the most any point
+            // gives: the points of a small disc about the cell decide most cells of a scan
+            // that fits the old map, before the whole neighbourhood is searched.
+            reference
+                .index()
+                .within_radius(&centre, CELL_DISC * res, &mut self.neighbours);
+            if self
+                .neighbours
+                .iter()
+                .any(|n| n.id < below && self.cell(&n.point) == Some((x, y)))
+            {
+                sum += u32::from(self.kernel[r * width + r]);
+                continue;
+            }
             reference
                 .index()
                 .within_radius(&centre, near, &mut self.neighbours);
@@ -620,16 +638,17 @@ mod tests {
     /// The bounded search is a fast path of the exhaustive one: on seeded maps of the room
     /// and the corridor, with old and recent points, guesses off by up to 0.5 m and 4°, and
     /// thresholds on both sides of the best score, it finds the same pose and score whenever
-    /// the best reaches the threshold, and nothing otherwise.
+    /// the best reaches the threshold, and nothing otherwise; and the score of the guess
+    /// alone, found without drawing the raster, is the raster's.
     #[test]
-    fn search_over_finds_what_the_exhaustive_search_finds_above_its_threshold() {
+    fn search_over_and_score_among_answer_as_the_exhaustive_search_does() {
         let mut rng = qicp_core::testdata::SplitMix::new(7);
         let mut search = CorrelativeSearch::new(CorrelativeParams {
             window_xy: 0.4,
             window_deg: 3.0,
             ..CorrelativeParams::default()
         });
-        let (mut found, mut pruned) = (0, 0);
+        let (mut found, mut pruned, mut scored) = (0, 0, 0);
         for case in 0..24u64 {
             let world = if case % 2 == 0 {
                 SyntheticWorld::room()
@@ -662,6 +681,13 @@ mod tests {
             let below = (case % 3 != 0).then(|| sizes[(case % 3) as usize]);
             let exhaustive = search.search_among(&reference, scan.points(), &guess, below);
             let best = exhaustive.map_or(0.0, |(c, _)| c.score);
+            // The score of the guess alone, from the points near each cell, is the drawn
+            // raster's.
+            if let (Some(b), Some((_, at_guess))) = (below, exhaustive) {
+                let alone = search.score_among(&reference, scan.points(), &guess, b);
+                assert_eq!(alone, Some(at_guess), "case {case}");
+                scored += 1;
+            }
             for min_score in [0.0, 0.3, best - 0.05, best, best + 1e-9, best + 0.05, 0.95] {
                 let bounded =
                     search.search_over(&reference, scan.points(), &guess, below, min_score);
@@ -679,5 +705,6 @@ mod tests {
         }
         // Both sides of the threshold were exercised.
         assert!(found > 40 && pruned > 40, "{found} found, {pruned} pruned");
+        assert!(scored >= 12, "{scored} scored alone");
     }
 }
