@@ -21,7 +21,11 @@ fn look_ups(c: &mut Criterion) {
     let mut rng = SplitMix::new(11);
     let mut reference = Reference::new(QuadTree::default());
     for k in 0..8 {
-        let at = Pose2::new(rng.range(-1.5, 1.5), rng.range(-0.5, 0.5), rng.range(-0.5, 0.5));
+        let at = Pose2::new(
+            rng.range(-1.5, 1.5),
+            rng.range(-0.5, 0.5),
+            rng.range(-0.5, 0.5),
+        );
         let scan = room.scan(&at, 0.01, k + 1);
         reference.insert_scan(&scan, &at, None).expect("finite");
     }

@@ -664,7 +664,7 @@ mod tests {
                     rng.range(-0.3, 0.3),
                 );
                 let scan = world.scan(&at, 0.01, case * 10 + k);
-                reference.insert_scan(&scan, &at, None).unwrap();
+                reference.insert_scan(&scan, &at, None).expect("finite");
                 sizes.push(reference.index().len() as u32);
             }
             let truth = Pose2::new(

@@ -500,7 +500,7 @@ impl SweepInput {
         let mut kept = Vec::new();
         let mut k = 0usize;
         let (count, span) = count_records(log, &options, scans, |t, _| {
-            if k % 2 == 0
+            if k.is_multiple_of(2)
                 && let Some(&pose) = nearest_within(&trajectory, t, MAX_DT)
                 && kept.last() != Some(&pose)
             {
