@@ -558,9 +558,9 @@ impl CorrelativeSearch {
     }
 }
 
-/// `v.round()` (half away from zero) as a cell index, if it lies in `0..side`: the same
-/// answer without the library call `round` is on targets without SSE4.1, in the raster's
-/// innermost loops.
+/// `v.round()` (half away from zero) as a cell index, if it lies in `0..side`. The same
+/// answer as `f64::round`, without the library call that `round` is on targets without
+/// SSE4.1: it sits in the raster's innermost loops.
 fn round_to_cell(v: f64, side: usize) -> Option<usize> {
     // Values from −0.5 on round below 0, from `side` − 0.5 on to `side` or more; NaN fails.
     if !(v > -0.5 && v < side as f64 - 0.5) {
