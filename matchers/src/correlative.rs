@@ -173,28 +173,17 @@ impl CorrelativeSearch {
             {
                 continue; // a point in this cell has been drawn already
             }
-            for ky in 0..width {
-                let Some(y) = (cy + ky).checked_sub(self.radius) else {
-                    continue;
-                };
-                if y >= y1 {
-                    break;
-                }
-                if y < y0 {
-                    continue;
-                }
-                for kx in 0..width {
-                    let Some(x) = (cx + kx).checked_sub(self.radius) else {
-                        continue;
-                    };
-                    if x >= x1 {
-                        break;
-                    }
-                    if x < x0 {
-                        continue;
-                    }
-                    let cell = &mut self.raster[(y - y0) * w + x - x0];
-                    *cell = (*cell).max(self.kernel[ky * width + kx]);
+            // The kernel's cells that fall on the held ones, row by row: (x, y) takes kernel
+            // entry (x + radius − cx, y + radius − cy).
+            let r = self.radius;
+            let (lo_x, hi_x) = (cx.saturating_sub(r).max(x0), (cx + r + 1).min(x1));
+            let (lo_y, hi_y) = (cy.saturating_sub(r).max(y0), (cy + r + 1).min(y1));
+            for y in lo_y..hi_y {
+                let row = &mut self.raster[(y - y0) * w + lo_x - x0..(y - y0) * w + hi_x - x0];
+                let k = (y + r - cy) * width;
+                let kernel = &self.kernel[k + lo_x + r - cx..k + hi_x + r - cx];
+                for (cell, &v) in row.iter_mut().zip(kernel) {
+                    *cell = (*cell).max(v);
                 }
             }
         }
