@@ -219,6 +219,11 @@ impl CorrelativeSearch {
             .map(move |k| (k, theta + (k as f64 * step).to_radians()))
     }
 
+    /// The window's rotation steps either way of the prediction.
+    fn turns(&self) -> i64 {
+        (self.params.window_deg / self.params.angle_step_deg).floor() as i64
+    }
+
     /// Lays the raster out around `guess`, large enough for the window and the scan's reach,
     /// and finds the corner cells of every rotation's scan points (up to `turns` steps
     /// either way) and the kernel: the window's translation steps either way, or `None` when
@@ -320,7 +325,7 @@ impl CorrelativeSearch {
         below: Option<u32>,
     ) -> Option<(Candidate, f64)> {
         let p = self.params;
-        let turns = (p.window_deg / p.angle_step_deg).floor() as i64;
+        let turns = self.turns();
         let steps = self.prepare(reference, local, guess, below, turns)?;
         let span = 2 * steps + 1;
         let mut at_guess = 0u32;
@@ -373,7 +378,7 @@ impl CorrelativeSearch {
         min_score: f64,
     ) -> Option<Candidate> {
         let p = self.params;
-        let turns = (p.window_deg / p.angle_step_deg).floor() as i64;
+        let turns = self.turns();
         let steps = self.prepare(reference, local, guess, below, turns)?;
         let span = 2 * steps + 1;
         let norm = 255.0 * local.len() as f64;
