@@ -43,6 +43,8 @@ pub const WARMUP: usize = 16;
 const BUFFER: usize = 4;
 /// Every wait of the bench gives up after this long.
 const STALL: Duration = Duration::from_secs(20);
+/// Shortest run of [`fill_and_read_cpu_us`] (wall time).
+const FILL_AND_READ_TIME: Duration = Duration::from_millis(200);
 /// The socket frame's header: `seq` (u64) and the send time (f64), like [`PayloadHeader`].
 ///
 /// [`PayloadHeader`]: qicp_bridge::payload::PayloadHeader
@@ -229,18 +231,24 @@ fn thread_cpu_ns() -> Option<u64> {
     Some((ticks(14)? + ticks(15)?) * 10_000_000)
 }
 
-/// CPU per repetition of writing a payload of `bytes` and reading it back, one thread (µs).
+/// CPU per repetition of writing a payload of `bytes` and reading it back, one thread (µs):
+/// at least `reps` repetitions, and as many more as [`FILL_AND_READ_TIME`] takes. A thread
+/// that never sleeps has its CPU time in `/proc` brought up to date only at the scheduler's
+/// tick (a few ms), so the run must last many ticks to be read to a few per cent.
 fn fill_and_read_cpu_us(bytes: usize, reps: usize) -> Option<f64> {
     let mut buf = vec![0u8; bytes];
     let start = thread_cpu_ns()?;
-    for seq in 0..reps as u64 {
+    let clock = Instant::now();
+    let mut seq = 0u64;
+    while seq < reps as u64 || clock.elapsed() < FILL_AND_READ_TIME {
         for (i, b) in buf.iter_mut().enumerate() {
             *b = byte(i, seq);
         }
         std::hint::black_box(read_payload(std::hint::black_box(&buf), seq).ok());
+        seq += 1;
     }
     let end = thread_cpu_ns()?;
-    Some((end - start) as f64 / 1e3 / reps as f64)
+    Some((end - start) as f64 / 1e3 / seq as f64)
 }
 
 /// One run: the counted messages' latencies, the time from the first counted send to the last

@@ -268,6 +268,12 @@ impl PayloadSubscriber {
         let mut count = 0;
         let mut seen_publisher = false;
         let mut last_activity = Instant::now();
+        // Whether events may be pending since the last drain. The wake-up's events are drained
+        // after the payloads it announced were handed over, not before, so that a payload's
+        // latency does not include the drain's system calls. Draining and then looking at
+        // the buffer again loses no wake-up: a payload is in the buffer before its event is
+        // sent, so every payload whose event a drain consumed is found by the look after it.
+        let mut undrained = false;
         loop {
             let mut stop = false;
             let n = self.receive(|header, payload| {
@@ -279,11 +285,19 @@ impl PayloadSubscriber {
             if stop {
                 return Ok(count);
             }
-            let publishers = self.service.dynamic_config().number_of_publishers();
-            seen_publisher |= publishers > 0;
             if n > 0 {
                 last_activity = Instant::now();
-            } else if (seen_publisher && publishers == 0) || last_activity.elapsed() > stall {
+            }
+            if undrained {
+                self.signals.drain().map_err(wait_error)?;
+                undrained = false;
+                if n > 0 {
+                    continue;
+                }
+            }
+            let publishers = self.service.dynamic_config().number_of_publishers();
+            seen_publisher |= publishers > 0;
+            if n == 0 && ((seen_publisher && publishers == 0) || last_activity.elapsed() > stall) {
                 // The publisher left and its payloads were taken, or nothing came for too long.
                 return Ok(count);
             }
@@ -302,7 +316,7 @@ impl PayloadSubscriber {
                     ) {
                         return Ok(count);
                     }
-                    self.signals.drain().map_err(wait_error)?;
+                    undrained = true;
                 }
             }
         }
