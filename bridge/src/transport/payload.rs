@@ -270,11 +270,15 @@ impl PayloadSubscriber {
         let mut last_activity = Instant::now();
         // Whether events may be pending since the last drain. The wake-up's events are drained
         // after the payloads it announced were handed over, not before, so that a payload's
-        // latency does not include the drain's system calls. Draining and then looking at
-        // the buffer again loses no wake-up: a payload is in the buffer before its event is
-        // sent, so every payload whose event a drain consumed is found by the look after it.
+        // latency does not include the drain's system calls. Every drain is followed by
+        // another look at the buffer, so no wake-up is lost: a payload is in the buffer
+        // before its event is sent, and every payload whose event a drain consumed is found
+        // by the look after it.
         let mut undrained = false;
         loop {
+            // Counted before the look: a publisher gone by now left its payloads in the
+            // buffer, so an empty look after it means they were all taken.
+            let publishers = self.service.dynamic_config().number_of_publishers();
             let mut stop = false;
             let n = self.receive(|header, payload| {
                 if !stop {
@@ -291,11 +295,8 @@ impl PayloadSubscriber {
             if undrained {
                 self.signals.drain().map_err(wait_error)?;
                 undrained = false;
-                if n > 0 {
-                    continue;
-                }
+                continue;
             }
-            let publishers = self.service.dynamic_config().number_of_publishers();
             seen_publisher |= publishers > 0;
             if n == 0 && ((seen_publisher && publishers == 0) || last_activity.elapsed() > stall) {
                 // The publisher left and its payloads were taken, or nothing came for too long.

@@ -19,8 +19,12 @@ pub(super) struct Session {
     known_publishers: usize,
     publisher_announced: bool,
     /// Connections are refreshed before the next sample is taken: at the start and after
-    /// every wait.
+    /// every drain of the events.
     refresh: bool,
+    /// Events may be pending since the last drain: a wait returned. They are drained once
+    /// the buffer is empty, after the samples the wake-up announced were handed over, so
+    /// that a sample's latency does not include the drain's system calls.
+    undrained: bool,
 }
 
 impl Session {
@@ -37,6 +41,7 @@ impl Session {
             known_publishers: 0,
             publisher_announced: true,
             refresh: true,
+            undrained: false,
         }
     }
 
@@ -79,8 +84,9 @@ impl<M: Message> Subscriber<M> {
 
     /// One step of the receive loop: refreshes the connections if due, then either handles
     /// the next sample in the buffer (its events and data go to `on_event`) or, the buffer
-    /// empty, checks the publisher's liveness and waits in `waitset` for an event or the next
-    /// tick. `Break(end)`: the stream ended (finish `session` with `end`).
+    /// empty, drains the events of the last wake-up (and looks again in the next step), or
+    /// checks the publisher's liveness and waits in `waitset` for an event or the next tick.
+    /// `Break(end)`: the stream ended (finish `session` with `end`).
     ///
     /// At most one data message reaches `on_event` per step.
     pub(super) fn step(
@@ -173,8 +179,19 @@ impl<M: Message> Subscriber<M> {
             return Ok(go_on);
         }
 
-        // The buffer is empty. Liveness: a killed publisher stays registered until someone
-        // removes its dead node; a quiet subscriber does so once per tick.
+        // The buffer is empty: the events of the last wake-up are drained, the connections
+        // refreshed (a new publisher announces itself by an event), and the buffer looked at
+        // again. No wake-up is lost: a sample is in the buffer before its event is sent, so
+        // every sample whose event the drain consumed is found by the look after it.
+        if s.undrained {
+            s.undrained = false;
+            s.publisher_announced = signals.drain().map_err(wait_error)?.publisher_connected;
+            s.refresh = true;
+            return Ok(go_on);
+        }
+
+        // Liveness: a killed publisher stays registered until someone removes its dead node;
+        // a quiet subscriber does so once per tick.
         let now = Instant::now();
         if now - s.last_activity >= wait.tick && now - s.last_cleanup >= wait.tick {
             self.node.try_cleanup_dead_nodes();
@@ -223,8 +240,7 @@ impl<M: Message> Subscriber<M> {
         ) {
             return Ok(ControlFlow::Break(StreamEnd::Interrupted));
         }
-        s.publisher_announced = signals.drain().map_err(wait_error)?.publisher_connected;
-        s.refresh = true;
+        s.undrained = true;
         Ok(go_on)
     }
 }
