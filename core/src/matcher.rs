@@ -41,6 +41,13 @@ pub trait ScanMatcher {
         1.0
     }
 
+    /// The share of a relevant scan's points that must lie off the map for the scan to enter
+    /// it: the default of `matcher.relevance.min_novelty` (keyframe selection by overlap).
+    /// Default 0: every relevant scan enters, as the paper's Alg. 1 reads.
+    fn min_novelty(&self) -> f64 {
+        0.0
+    }
+
     /// The pose of `scan` in the frame of `reference`, starting from `guess`, trusting the
     /// scan alone.
     fn match_scan<I: SpatialIndex>(

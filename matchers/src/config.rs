@@ -462,6 +462,10 @@ impl MatcherConfig {
                 .unwrap_or(1.0);
             self.relevance.surface_band_sigmas = Some(sigmas);
         }
+        if self.relevance.min_novelty.is_none() {
+            let share = self.algorithm.min_novelty(&self.section).unwrap_or(0.0);
+            self.relevance.min_novelty = Some(share);
+        }
     }
 
     /// Checks every value.

@@ -184,6 +184,16 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         0.0
     }
 
+    /// 0.05: a relevant scan enters the map only where at least 5 % of its points (9 of a
+    /// 181-beam scan) lie farther than `novelty_distance` (5 cm) from it. Without the band,
+    /// every pass over ground already mapped thickens the map, and the range rule's radius
+    /// searches grow with its density: over 12 passes of the Intel log q-idc's map grew
+    /// from 62k to 177k points and its median time per scan from 1.1 to 3.4 ms. With the gate
+    /// a revisit that matches the map adds a few scans (see the README's robustness section).
+    fn min_novelty(&self) -> f64 {
+        0.05
+    }
+
     /// The prior (odometry) is fused with each iteration's estimate through the information
     /// of the closest-point pairs, and sizes the range rule's first window.
     fn match_with_prior<I: SpatialIndex>(

@@ -51,10 +51,13 @@ pub struct Relevance {
     /// farther than `novelty_distance` from every map point: a place the map already holds
     /// adds nothing on a revisit, so the map grows with the area explored, not with the
     /// number of visits (keyframe selection by overlap). 0 inserts every relevant scan, as
-    /// Alg. 1 reads. Default 0 (off): at 0.02 (a handful of new points in a 181-beam scan)
-    /// the map of 30 Intel laps stays near one lap's, but the robustness sweep on Intel
-    /// finds more fragile variants than without it (see the README).
-    pub min_novelty: f64,
+    /// Alg. 1 reads. Default (`None`): the matcher's own [`ScanMatcher::min_novelty`], 0.05
+    /// for IDC (whose range rule slows with the map's density; on Intel it also scores
+    /// better with it, and its sweep holds) and 0 for WSM (whose Intel sweep, at 0.05, has 5
+    /// of 56 variants over the bound against 1 of 52 without; see the README).
+    ///
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_novelty: Option<f64>,
     /// How far (m) a scan point must lie from the map to count as new. Default 0.05, five
     /// times the range noise of the Intel laser: a point seen before and matched lies well
     /// within it.
@@ -102,7 +105,7 @@ impl Default for Relevance {
             rho_max_deg: 5.0,
             map_resolution: None,
             surface_band_sigmas: None,
-            min_novelty: 0.0,
+            min_novelty: None,
             novelty_distance: 0.05,
             cell_size: 0.1,
             max_cell_points: 0,
@@ -126,10 +129,12 @@ impl Relevance {
             "matcher.relevance.surface_band_sigmas",
             self.surface_band_sigmas.unwrap_or(0.0),
         )?;
-        if !(0.0..=1.0).contains(&self.min_novelty) {
+        if let Some(share) = self.min_novelty
+            && !(0.0..=1.0).contains(&share)
+        {
             return Err(ConfigError::invalid(
                 "matcher.relevance.min_novelty",
-                format!("{} must lie in [0, 1]", self.min_novelty),
+                format!("{share} must lie in [0, 1]"),
             ));
         }
         non_negative("matcher.relevance.novelty_distance", self.novelty_distance)?;
@@ -179,16 +184,18 @@ impl Relevance {
     }
 
     /// Whether a scan at `pose` shows enough the `map` does not hold yet (see
-    /// [`Relevance::min_novelty`]).
+    /// [`Relevance::min_novelty`]; `matcher_min_novelty` where it is not set).
     #[must_use]
     pub fn is_novel<I: SpatialIndex + ?Sized>(
         &self,
         map: &I,
         scan: &qicp_core::Scan,
         pose: &Pose2,
+        matcher_min_novelty: f64,
     ) -> bool {
         let points = scan.points();
-        if self.min_novelty <= 0.0 || map.is_empty() || points.is_empty() {
+        let min_novelty = self.min_novelty.unwrap_or(matcher_min_novelty);
+        if min_novelty <= 0.0 || map.is_empty() || points.is_empty() {
             return true;
         }
         let reach = self.novelty_distance * self.novelty_distance;
@@ -199,7 +206,7 @@ impl Relevance {
                     .is_none()
             })
             .count();
-        novel as f64 >= self.min_novelty * points.len() as f64
+        novel as f64 >= min_novelty * points.len() as f64
     }
 
     /// paper Alg. 1: relevant if τ̂x > τmax or τ̂y > τmax or ρ̂ > ρmax.
@@ -577,6 +584,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             result,
             map_resolution: self.matcher.map_resolution(self.reference.noise()),
             surface_band_sigmas: self.matcher.surface_band_sigmas(),
+            min_novelty: self.matcher.min_novelty(),
             range_sigma: self.reference.noise().sigma_range,
         };
         let mut store = Store {

@@ -47,6 +47,11 @@ pub struct Matched<'a> {
     ///
     /// [`ScanMatcher::surface_band_sigmas`]: qicp_core::ScanMatcher::surface_band_sigmas
     pub surface_band_sigmas: f64,
+    /// The matcher's own novelty share ([`ScanMatcher::min_novelty`]): the default of
+    /// [`Relevance::min_novelty`].
+    ///
+    /// [`ScanMatcher::min_novelty`]: qicp_core::ScanMatcher::min_novelty
+    pub min_novelty: f64,
     /// The laser's range noise σ (m), held by the reference: the unit of
     /// [`Relevance::surface_band_sigmas`].
     pub range_sigma: f64,
@@ -123,7 +128,7 @@ impl ReferencePolicy for MapPolicy {
         {
             return false;
         }
-        if !relevance.is_novel(reference.index(), m.scan, &m.laser) {
+        if !relevance.is_novel(reference.index(), m.scan, &m.laser, m.min_novelty) {
             return false;
         }
         // paper Alg. 1: insert all scan points of s_global into Q_t

@@ -88,6 +88,12 @@ pub trait Algorithm: 'static {
     fn surface_band_sigmas(params: &Self::Params) -> f64 {
         Self::matcher::<qicp_core::ClosestPoint>(IcpParams::default(), params).surface_band_sigmas()
     }
+
+    /// The default of `matcher.relevance.min_novelty` for this algorithm: by default its
+    /// matcher's [`ScanMatcher::min_novelty`].
+    fn min_novelty(params: &Self::Params) -> f64 {
+        Self::matcher::<qicp_core::ClosestPoint>(IcpParams::default(), params).min_novelty()
+    }
 }
 
 /// An index a map can be held in, as the registry knows it.
@@ -206,6 +212,7 @@ pub(crate) trait ErasedAlgorithm: Send + Sync {
     fn map_resolution(&self, section: &toml::Table, noise: &LaserNoise)
     -> Result<f64, ConfigError>;
     fn surface_band_sigmas(&self, section: &toml::Table) -> Result<f64, ConfigError>;
+    fn min_novelty(&self, section: &toml::Table) -> Result<f64, ConfigError>;
     fn weighs_by_laser_noise(&self) -> bool;
     fn build(
         &self,
@@ -264,6 +271,9 @@ impl<A: Algorithm> ErasedAlgorithm for Registered<A> {
     }
     fn surface_band_sigmas(&self, section: &toml::Table) -> Result<f64, ConfigError> {
         Ok(A::surface_band_sigmas(&self.params(section)?))
+    }
+    fn min_novelty(&self, section: &toml::Table) -> Result<f64, ConfigError> {
+        Ok(A::min_novelty(&self.params(section)?))
     }
     fn weighs_by_laser_noise(&self) -> bool {
         A::WEIGHS_BY_LASER_NOISE

@@ -243,7 +243,7 @@ fn steering_parameters_scale_one_at_a_time() {
     let mut gated = MatcherConfig::defaults(MatcherKind::QWsm);
     let novelty = "matcher.relevance.novelty_distance".to_string();
     assert!(!gated.steering_parameters().contains(&novelty));
-    gated.relevance.min_novelty = 0.02;
+    gated.relevance.min_novelty = Some(0.02);
     assert!(gated.steering_parameters().contains(&novelty));
     let err = MatcherConfig::defaults(MatcherKind::QWsm)
         .scaled("matcher.icp.nope", 2.0)

@@ -486,7 +486,7 @@ fn revisits_add_nothing_to_a_map_with_the_novelty_gate() {
     let world = SyntheticWorld::room();
     let laps = |min_novelty: f64| {
         let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
-        config.relevance.min_novelty = min_novelty;
+        config.relevance.min_novelty = Some(min_novelty);
         let mut pipeline = config.build().expect("builds");
         let mut after_loop = Vec::new();
         for k in 0..400 {
@@ -504,6 +504,49 @@ fn revisits_add_nothing_to_a_map_with_the_novelty_gate() {
     // With the gate, nine more laps add almost nothing; without it the map keeps growing.
     assert!(gated[9] as f64 <= 1.05 * gated[0] as f64, "{gated:?}");
     assert!(open[9] as f64 > 1.2 * open[0] as f64, "{open:?}");
+}
+
+#[test]
+fn q_idc_gates_its_map_by_novelty_by_default_and_stops_its_growth_over_ten_loops() {
+    // The default: 5 % of a scan new for IDC, the whole relevant scan for WSM (Alg. 1).
+    let effective = |kind| {
+        let mut c = MatcherConfig::defaults(kind);
+        c.fill_defaults();
+        c.relevance.min_novelty
+    };
+    assert_eq!(effective(MatcherKind::QIdc), Some(0.05));
+    assert_eq!(effective(MatcherKind::QWsm), Some(0.0));
+    let gated = loop_sizes(MatcherConfig::defaults(MatcherKind::QIdc), 10);
+    let mut open = MatcherConfig::defaults(MatcherKind::QIdc);
+    open.relevance.min_novelty = Some(0.0);
+    let open = loop_sizes(open, 10);
+    println!("q-idc by default: {gated:?}; min_novelty = 0: {open:?}");
+    // Nine more laps: 985 → 1,025 points with the gate, 1,284 → 1,522 without.
+    assert!(gated[9] as f64 <= 1.05 * gated[0] as f64, "{gated:?}");
+    assert!(
+        4 * gated[9].saturating_sub(gated[0]) < open[9].saturating_sub(open[0]),
+        "{gated:?} {open:?}"
+    );
+    // A typed pipeline takes the matcher's own default, as the registry's does.
+    let mut typed = Pipeline::new(
+        "q-idc",
+        Idc::<MutualNearest<QuadTree>>::new(IcpParams::default(), IdcParams::default()),
+        QuadTree::default(),
+        Policy::Boosted(Relevance::default()),
+        LaserNoise::default(),
+    );
+    let world = SyntheticWorld::room();
+    let mut sizes = Vec::new();
+    for k in 0..400 {
+        typed.process(&loop_record(&world, k));
+        if k % 40 == 39 {
+            sizes.push(typed.reference_points().len());
+        }
+    }
+    assert!(
+        sizes[9] as f64 <= 1.05 * sizes[0] as f64,
+        "typed: {sizes:?}"
+    );
 }
 
 /// Posts along the first 5 m of the drive and nothing after: the scans fix the motion while
