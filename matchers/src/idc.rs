@@ -185,7 +185,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
     }
 
     /// 0.05: a relevant scan enters the map only where at least 5 % of its points (9 of a
-    /// 181-beam scan) lie farther than `novelty_distance` (5 cm) from it. Without the band,
+    /// 181-beam scan) lie farther than `novelty_distance` (5 cm) from it. Without the gate,
     /// every pass over ground already mapped thickens the map, and the range rule's radius
     /// searches grow with its density: over 12 passes of the Intel log q-idc's map grew
     /// from 62k to 177k points and its median time per scan from 1.1 to 3.4 ms. With the gate

@@ -55,7 +55,6 @@ pub struct Relevance {
     /// for IDC (whose range rule slows with the map's density; on Intel it also scores
     /// better with it, and its sweep holds) and 0 for WSM (whose Intel sweep, at 0.05, has 5
     /// of 56 variants over the bound against 1 of 52 without; see the README).
-    ///
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_novelty: Option<f64>,
     /// How far (m) a scan point must lie from the map to count as new. Default 0.05, five
