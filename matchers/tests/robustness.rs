@@ -401,8 +401,12 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
 
 /// Map points after each of ten loops of the room, with `config`.
 fn loop_sizes(config: MatcherConfig, loops: usize) -> Vec<usize> {
+    loop_sizes_of(config.build().expect("builds").as_mut(), loops)
+}
+
+/// Map points after each of `loops` loops of the room, driven through `pipeline`.
+fn loop_sizes_of(pipeline: &mut dyn Odometry, loops: usize) -> Vec<usize> {
     let world = SyntheticWorld::room();
-    let mut pipeline = config.build().expect("builds");
     let mut sizes = Vec::new();
     for k in 0..40 * loops {
         let e = pipeline.process(&loop_record(&world, k));
@@ -435,13 +439,15 @@ fn the_default_surface_band_slows_the_growth_of_a_map_driven_ten_times() {
         );
     }
     // The defaults: on for WSM, off for IDC.
-    let effective = |kind| {
-        let mut c = MatcherConfig::defaults(kind);
-        c.fill_defaults();
-        c.relevance.surface_band_sigmas
-    };
-    assert_eq!(effective(MatcherKind::QWsm), Some(1.0));
-    assert_eq!(effective(MatcherKind::QIdc), Some(0.0));
+    assert_eq!(effective(MatcherKind::QWsm).surface_band_sigmas, Some(1.0));
+    assert_eq!(effective(MatcherKind::QIdc).surface_band_sigmas, Some(0.0));
+}
+
+/// The relevance section of `kind`'s defaults, with the matcher's own defaults filled in.
+fn effective(kind: MatcherKind) -> Relevance {
+    let mut c = MatcherConfig::defaults(kind);
+    c.fill_defaults();
+    c.relevance
 }
 
 #[test]
@@ -483,20 +489,10 @@ fn a_windowed_map_holds_only_its_recent_scans_over_ten_loops() {
 
 #[test]
 fn revisits_add_nothing_to_a_map_with_the_novelty_gate() {
-    let world = SyntheticWorld::room();
     let laps = |min_novelty: f64| {
         let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
         config.relevance.min_novelty = Some(min_novelty);
-        let mut pipeline = config.build().expect("builds");
-        let mut after_loop = Vec::new();
-        for k in 0..400 {
-            let e = pipeline.process(&loop_record(&world, k));
-            assert!(e.pose.distance(&on_loop(k)) < 0.05, "step {k}: {e:?}");
-            if k % 40 == 39 {
-                after_loop.push(pipeline.reference_points().len());
-            }
-        }
-        after_loop
+        loop_sizes(config, 10)
     };
     let gated = laps(0.02);
     let open = laps(0.0);
@@ -509,13 +505,8 @@ fn revisits_add_nothing_to_a_map_with_the_novelty_gate() {
 #[test]
 fn q_idc_gates_its_map_by_novelty_by_default_and_stops_its_growth_over_ten_loops() {
     // The default: 5 % of a scan new for IDC, the whole relevant scan for WSM (Alg. 1).
-    let effective = |kind| {
-        let mut c = MatcherConfig::defaults(kind);
-        c.fill_defaults();
-        c.relevance.min_novelty
-    };
-    assert_eq!(effective(MatcherKind::QIdc), Some(0.05));
-    assert_eq!(effective(MatcherKind::QWsm), Some(0.0));
+    assert_eq!(effective(MatcherKind::QIdc).min_novelty, Some(0.05));
+    assert_eq!(effective(MatcherKind::QWsm).min_novelty, Some(0.0));
     let gated = loop_sizes(MatcherConfig::defaults(MatcherKind::QIdc), 10);
     let mut open = MatcherConfig::defaults(MatcherKind::QIdc);
     open.relevance.min_novelty = Some(0.0);
@@ -535,14 +526,7 @@ fn q_idc_gates_its_map_by_novelty_by_default_and_stops_its_growth_over_ten_loops
         Policy::Boosted(Relevance::default()),
         LaserNoise::default(),
     );
-    let world = SyntheticWorld::room();
-    let mut sizes = Vec::new();
-    for k in 0..400 {
-        typed.process(&loop_record(&world, k));
-        if k % 40 == 39 {
-            sizes.push(typed.reference_points().len());
-        }
-    }
+    let sizes = loop_sizes_of(&mut typed, 10);
     assert!(
         sizes[9] as f64 <= 1.05 * sizes[0] as f64,
         "typed: {sizes:?}"
