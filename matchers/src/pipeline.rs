@@ -649,16 +649,22 @@ where
             && result.fallback.is_none()
             && prior.is_some_and(|lambda| self.validator.disagrees(&lambda, &guess, &result.pose));
         check.withheld = boosted && contradicted;
-        // Odometry says the match moved where the robot did not; where the scan cannot tell
-        // the two apart, odometry's pose stands, as after a refusal.
+        // Odometry says the match moved where the robot did not; unless the scan explains
+        // the match by enough points more than the prediction to outweigh odometry,
+        // odometry's pose stands, as after a refusal.
         if check.withheld
-            && self.validator.params.veto_falls_back
-            && self
-                .validator
-                .inlier_share(&self.reference, record.scan.points(), &guess)
-                >= check.inlier_share
+            && let Some(lambda) = prior
         {
-            result = MatchResult::fallback(guess, Fallback::Refused);
+            let local = record.scan.points();
+            let gained = (check.inlier_share
+                - self.validator.inlier_share(&self.reference, local, &guess))
+                * local.len() as f64;
+            if !self
+                .validator
+                .outweighs_odometry(gained, &lambda, &guess, &result.pose)
+            {
+                result = MatchResult::fallback(guess, Fallback::Refused);
+            }
         }
         let laser = self.reference_frame * result.pose;
         let protect = boosted && (check.refused || check.withheld);

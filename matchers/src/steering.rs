@@ -32,6 +32,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("validation.max_pair_drop", Acts::Any),
     ("validation.max_residual_ratio", Acts::Any),
     ("validation.max_odometry_chi2", Acts::Any),
+    ("validation.point_evidence", Acts::Map),
     ("correlative.window_xy", Acts::Any),
     ("correlative.window_deg", Acts::Any),
     ("revisit.age_scans", Acts::Map),

@@ -77,6 +77,15 @@ pub struct ValidationParams {
     /// the scan better (a recovery from odometry gone wrong) it is followed as before. false
     /// follows every withheld match. Default true.
     pub veto_falls_back: bool,
+    /// How much one scan point counts against odometry when a withheld match is weighed
+    /// against the prediction (`veto_falls_back`): the log-likelihood ratio of a point the
+    /// match explains and the prediction does not. The match is followed only where the
+    /// points it explains beyond the prediction, times this, reach half the χ² of its
+    /// disagreement with odometry: a turn of 30° that odometry never made is not taken on
+    /// one point more of a five-point scan. Default 5, the ratio of a point explained with
+    /// probability 0.99 at the right pose and 0.3 at a wrong one (ln(0.99·0.7 / (0.3·0.01))
+    /// ≈ 5.4); the points of a scan are not independent, so this is generous to the scan.
+    pub point_evidence: f64,
 }
 
 impl Default for ValidationParams {
@@ -92,6 +101,7 @@ impl Default for ValidationParams {
             max_refusals: 3,
             max_odometry_chi2: 16.3,
             veto_falls_back: true,
+            point_evidence: 5.0,
         }
     }
 }
@@ -131,6 +141,7 @@ impl ValidationParams {
             "matcher.validation.max_odometry_chi2",
             self.max_odometry_chi2,
         )?;
+        positive("matcher.validation.point_evidence", self.point_evidence)?;
         if self.max_refusals == 0 {
             return Err(ConfigError::invalid(
                 "matcher.validation.max_refusals",
@@ -139,6 +150,17 @@ impl ValidationParams {
         }
         Ok(())
     }
+}
+
+/// The squared Mahalanobis distance of `matched` from `predicted` under the prior information
+/// `lambda` (both poses in the reference frame).
+fn odometry_chi2(lambda: &Matrix3<f64>, predicted: &Pose2, matched: &Pose2) -> f64 {
+    let d = Vector3::new(
+        matched.x - predicted.x,
+        matched.y - predicted.y,
+        qicp_core::normalize_angle(matched.theta - predicted.theta),
+    );
+    d.dot(&(lambda * d))
 }
 
 /// True when `fit` explains a smaller share than the `level` of [`Validator::threshold`],
@@ -240,12 +262,26 @@ impl Validator {
         if !self.params.enabled || self.params.max_odometry_chi2 <= 0.0 {
             return false;
         }
-        let d = Vector3::new(
-            matched.x - predicted.x,
-            matched.y - predicted.y,
-            qicp_core::normalize_angle(matched.theta - predicted.theta),
-        );
-        d.dot(&(lambda * d)) > self.params.max_odometry_chi2
+        odometry_chi2(lambda, predicted, matched) > self.params.max_odometry_chi2
+    }
+
+    /// True when a match that odometry's veto withheld is to be followed rather than the
+    /// prediction ([`ValidationParams::veto_falls_back`]): when the scan points it explains
+    /// beyond the prediction (`gained`, which may be negative), each worth
+    /// [`ValidationParams::point_evidence`], outweigh half the χ² of its disagreement with
+    /// odometry under the prior information `lambda`. Always true when the fall-back is off.
+    #[must_use]
+    pub fn outweighs_odometry(
+        &self,
+        gained: f64,
+        lambda: &Matrix3<f64>,
+        predicted: &Pose2,
+        matched: &Pose2,
+    ) -> bool {
+        !self.params.veto_falls_back
+            || (gained > 0.0
+                && gained * self.params.point_evidence
+                    >= 0.5 * odometry_chi2(lambda, predicted, matched))
     }
 
     /// Share of `local` (scan points, laser frame) within `inlier_distance` of the reference
@@ -431,5 +467,30 @@ mod tests {
         );
         assert!(v.refuse(bad, t));
         assert_eq!(v.threshold(), None, "the third starts afresh");
+    }
+
+    #[test]
+    fn a_withheld_match_is_followed_only_on_points_that_outweigh_odometry() {
+        // σ 1° in heading, 5 cm in x and y.
+        let lambda =
+            Matrix3::from_diagonal(&Vector3::new(400.0, 400.0, 1.0f64.to_radians().powi(-2)));
+        let v = Validator::new(ValidationParams::default());
+        let predicted = Pose2::IDENTITY;
+        let turned = |deg: f64| Pose2::new(0.0, 0.0, deg.to_radians());
+        // 33° off (χ² ≈ 1089): one point more is not enough, 200 are.
+        assert!(!v.outweighs_odometry(1.0, &lambda, &predicted, &turned(33.0)));
+        assert!(v.outweighs_odometry(200.0, &lambda, &predicted, &turned(33.0)));
+        // 5° off (χ² 25): three points more (3 × 5 ≥ 12.5) are.
+        assert!(v.outweighs_odometry(3.0, &lambda, &predicted, &turned(5.0)));
+        assert!(!v.outweighs_odometry(2.0, &lambda, &predicted, &turned(5.0)));
+        // None gained, or fewer: odometry's pose stands, however slight the disagreement.
+        assert!(!v.outweighs_odometry(0.0, &lambda, &predicted, &turned(4.1)));
+        assert!(!v.outweighs_odometry(-3.0, &lambda, &predicted, &turned(4.1)));
+        // With the fall-back off every withheld match is followed.
+        let follow = Validator::new(ValidationParams {
+            veto_falls_back: false,
+            ..ValidationParams::default()
+        });
+        assert!(follow.outweighs_odometry(-3.0, &lambda, &predicted, &turned(33.0)));
     }
 }

@@ -637,3 +637,86 @@ fn a_stalled_odometry_reading_that_catches_up_is_not_counted_twice() {
         );
     }
 }
+
+/// Twelve posts on a ring of 3 m about the origin, one every 30°: turned by 30° about the
+/// centre, a scan from there lands on the posts again, point for point.
+fn ring_of_posts() -> SyntheticWorld {
+    SyntheticWorld {
+        walls: Vec::new(),
+        posts: (0..12)
+            .map(|k| {
+                let a = f64::from(k) * 30f64.to_radians();
+                (3.0 * a.cos(), 3.0 * a.sin(), 0.1)
+            })
+            .collect(),
+    }
+}
+
+/// Turning in place at the ring's centre, 2° a scan.
+fn spinning(k: usize) -> Pose2 {
+    Pose2::new(0.0, 0.0, (2.0 * k as f64).to_radians())
+}
+
+/// Turned by one post of the ring: every point still lies on a post.
+fn one_post_on(p: &Pose2) -> Pose2 {
+    *p * Pose2::new(0.0, 0.0, 30f64.to_radians())
+}
+
+/// Runs the sabotaged q-wsm (its 12th call turned by one post) through 20 scans at the ring's
+/// centre, with odometry that slips by 4° at scan 11, and returns the heading errors (deg).
+fn ring_heading_errors(point_evidence: f64) -> Vec<f64> {
+    let world = ring_of_posts();
+    let gate = ValidationParams {
+        search: false,
+        point_evidence,
+        ..ValidationParams::default()
+    };
+    let mut pipeline = sabotaged_with(12, one_post_on, gate);
+    let slip = Pose2::new(0.0, 0.0, 4f64.to_radians());
+    (0..20)
+        .map(|k| {
+            let mut scan = world.scan(&spinning(k), 0.005, k as u64 + 1);
+            scan.timestamp = k as f64;
+            let odometry = if k < 11 {
+                spinning(k)
+            } else {
+                spinning(k) * slip
+            };
+            let e = pipeline.process(&Record {
+                scan,
+                odometry,
+                truth: Some(spinning(k)),
+                laser_offset: Pose2::IDENTITY,
+            });
+            if k == 11 {
+                assert!(e.check.withheld && !e.inserted, "{e:?}");
+            }
+            qicp_core::normalize_angle(e.pose.theta - spinning(k).theta)
+                .abs()
+                .to_degrees()
+        })
+        .collect()
+}
+
+#[test]
+fn a_turn_odometry_never_made_is_not_followed_on_a_few_points_more() {
+    // At scan 11 odometry is 4° off, too far for the posts 3 m away to explain its
+    // prediction, while the match turned by one post explains every point: a few points
+    // against a turn of 26° that odometry's σ of about 1° rules out.
+    let weighed = ring_heading_errors(ValidationParams::default().point_evidence);
+    // The prediction stands at scan 11 (4° off), and the matches from it turn back to within
+    // about 1° (the sparse posts against odometry's prior, still centred 4° off).
+    assert!((weighed[11] - 4.0).abs() < 0.5, "{weighed:.2?}");
+    for (k, deg) in weighed.iter().enumerate().skip(12) {
+        assert!(*deg < 1.5, "scan {k}: {deg:.2}° off: {weighed:.2?}");
+    }
+    // Where any point more decides (the fall-back's earlier test), the turn is followed and
+    // the drive stays one post off for good.
+    let any_point = ring_heading_errors(1e9);
+    for (k, deg) in any_point.iter().enumerate().skip(11) {
+        assert!(
+            (deg - 30.0).abs() < 1.5,
+            "scan {k}: {deg:.2}°: {any_point:.2?}"
+        );
+    }
+}
