@@ -41,14 +41,15 @@ fn q_wsm_on_intel_beats_rbpf_slam() {
     // 0.027 m and must stay below 0.05 m.
     assert!(trans < 0.05, "q-wsm mean translational error {trans:.4} m");
     assert!(rot < 1.0, "q-wsm mean rotational error {rot:.3}°");
-    // Besides the first scan, only matches the validation refused (2 of 13,631) keep the
+    // Besides the first scan, only matches the validation refused, and those odometry's
+    // veto withheld that the scan did not weigh up (6 of 13,631 in all), keep the
     // prediction.
     let refused = reasons.get("refused").copied().unwrap_or(0);
     assert!(
         fallbacks - refused <= 1,
         "only the first scan has nothing to match"
     );
-    assert!(refused <= 5, "{refused} matches refused");
+    assert!(refused <= 10, "{refused} matches refused");
 }
 
 #[test]
