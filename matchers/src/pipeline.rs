@@ -572,6 +572,9 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         {
             return false;
         }
+        if !self.revisit.corroborated(&result.pose, &again.pose) {
+            return false;
+        }
         *result = again;
         true
     }

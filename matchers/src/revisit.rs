@@ -13,8 +13,9 @@
 //! only. Where some pose of the window explains the scan in the old map well (a score of at
 //! least 1 − `max_miss`) and by `min_gain` better than the match does, ICP is run again from
 //! that pose against the whole map, without the odometry prior, and its result replaces the
-//! match if the old map still explains it as well. The re-anchored match is not withheld by
-//! odometry's veto: it corrects drift that odometry cannot see.
+//! match if the old map still explains it as well and the look-up before found the same
+//! correction (`confirmations`). The re-anchored match is not withheld by odometry's veto: it
+//! corrects drift that odometry cannot see.
 //!
 //! This is a local correction, not a loop closure: the drifted stretch of map stays where it
 //! was laid, and the estimate jumps by the drift. It helps where the drift is small enough to
@@ -54,7 +55,19 @@ pub struct RevisitParams {
     /// Half-width of the rotation window (deg). Default 3: a heading error larger than this
     /// over a loop leaves the old map too far off for a local correction to be trusted.
     pub window_deg: f64,
+    /// A re-anchoring is taken only once this many look-ups in a row (one every `every`
+    /// matched scans) have each found it, their corrections of the match agreeing within
+    /// [`AGREE_XY`] and [`AGREE_DEG`]: a lone look-up that the old map answers elsewhere is
+    /// aliasing (a stretch of corridor, a room like another), as place recognition asks for
+    /// consecutive detections before it closes a loop. Default 2; 1 re-anchors on the first.
+    pub confirmations: usize,
 }
+
+/// Two look-ups' corrections agree when, applied to the same match, they differ by less
+/// than this (m): two cells of the look-up's raster.
+pub const AGREE_XY: f64 = 0.1;
+/// … and by less than this (deg): two angle steps of the look-up's raster.
+pub const AGREE_DEG: f64 = 1.0;
 
 impl Default for RevisitParams {
     fn default() -> Self {
@@ -66,6 +79,7 @@ impl Default for RevisitParams {
             min_gain: 0.2,
             window_xy: 1.0,
             window_deg: 3.0,
+            confirmations: 2,
         }
     }
 }
@@ -81,6 +95,12 @@ impl RevisitParams {
             return Err(ConfigError::invalid(
                 "matcher.revisit.age_scans",
                 format!("{} must be in 1..=1000000", self.age_scans),
+            ));
+        }
+        if !(1..=100).contains(&self.confirmations) {
+            return Err(ConfigError::invalid(
+                "matcher.revisit.confirmations",
+                format!("{} must be in 1..=100", self.confirmations),
             ));
         }
         if !(1..=1_000_000).contains(&self.every) {
@@ -137,6 +157,9 @@ pub struct Revisit {
     /// The map's length after each of the newest `age_scans` + 1 insertions.
     sizes: VecDeque<usize>,
     matched: usize,
+    /// The run of agreeing look-ups so far: the matched count of the latest, its correction
+    /// (re-anchored pose ∘ match⁻¹) and how many agreed.
+    run: Option<(usize, Pose2, usize)>,
 }
 
 impl Revisit {
@@ -148,6 +171,7 @@ impl Revisit {
             search: CorrelativeSearch::new(params.search()),
             sizes: VecDeque::new(),
             matched: 0,
+            run: None,
         }
     }
 
@@ -205,6 +229,32 @@ impl Revisit {
             score: best.score,
             below,
         })
+    }
+
+    /// Counts a confirmed re-anchoring of the match `matched` to `reanchored` found by this
+    /// look-up, and tells whether it is to be taken: once `confirmations` look-ups in a row
+    /// have found corrections that agree (see [`RevisitParams::confirmations`]).
+    pub fn corroborated(&mut self, matched: &Pose2, reanchored: &Pose2) -> bool {
+        let now = self.matched;
+        let every = self.params.every;
+        let agrees = |(at, correction, _): &(usize, Pose2, usize)| {
+            let expected = *correction * *matched;
+            at + every == now
+                && expected.distance(reanchored) < AGREE_XY
+                && qicp_core::normalize_angle(expected.theta - reanchored.theta).abs()
+                    < AGREE_DEG.to_radians()
+        };
+        let count = match self.run {
+            Some(run) if agrees(&run) => run.2 + 1,
+            _ => 1,
+        };
+        if count >= self.params.confirmations {
+            self.run = None;
+            true
+        } else {
+            self.run = Some((now, *reanchored * matched.inverse(), count));
+            false
+        }
     }
 
     /// Whether a match refined from `proposal` still explains the scan in the old map as

@@ -41,6 +41,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("revisit.min_gain", Acts::Map),
     ("revisit.window_xy", Acts::Map),
     ("revisit.window_deg", Acts::Map),
+    ("revisit.confirmations", Acts::Map),
 ];
 
 /// Steering parameters that act only through another one: each is left out of the sweep

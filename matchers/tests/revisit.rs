@@ -119,6 +119,7 @@ fn revisit_values_out_of_range_are_refused_with_their_key() {
         ("window_deg", "200"),
         ("age_scans", "0"),
         ("every", "0"),
+        ("confirmations", "0"),
     ] {
         let text = format!("[matcher]\nkind = \"q-wsm\"\n[matcher.revisit]\n{key} = {value}\n");
         let err = Registry::builtin()
@@ -130,4 +131,52 @@ fn revisit_values_out_of_range_are_refused_with_their_key() {
             "{key}: {err}"
         );
     }
+}
+
+/// The re-anchored pose a look-up at `drifted` finds: the proposal refined by ICP against the
+/// whole map.
+fn reanchored(revisit: &mut Revisit, reference: &Reference<QuadTree>, drifted: &Pose2) -> Pose2 {
+    let scan = SyntheticWorld::room().scan(&pose(4), 0.005, 99);
+    let proposal = revisit
+        .propose(reference, scan.points(), drifted)
+        .expect("a proposal");
+    let mut wsm = Wsm::<MutualNearest<QuadTree>>::new(IcpParams::default(), WsmParams::default());
+    let again = wsm.match_with_prior(reference, &scan, proposal.start, None);
+    assert!(revisit.confirms(reference, scan.points(), &again.pose, &proposal));
+    again.pose
+}
+
+#[test]
+fn a_reanchoring_is_taken_once_consecutive_look_ups_agree_on_it() {
+    let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
+    let drifted = drift * pose(4);
+    let mut revisit = look_ups();
+    let reference = map(drift, 3, &mut revisit);
+    // The first look-up finds it; the default asks for a second in a row.
+    let found = reanchored(&mut revisit, &reference, &drifted);
+    assert!(!revisit.corroborated(&drifted, &found));
+    let again = reanchored(&mut revisit, &reference, &drifted);
+    assert!(revisit.corroborated(&drifted, &again), "agreeing look-ups");
+    // A second look-up whose correction lands elsewhere (aliasing) starts a new run.
+    let found = reanchored(&mut revisit, &reference, &drifted);
+    assert!(!revisit.corroborated(&drifted, &found));
+    let elsewhere = Pose2::new(0.3, 0.0, 0.0) * reanchored(&mut revisit, &reference, &drifted);
+    assert!(!revisit.corroborated(&drifted, &elsewhere), "0.3 m apart");
+    // A look-up that finds nothing between two that agree breaks the run.
+    let found = reanchored(&mut revisit, &reference, &drifted);
+    assert!(!revisit.corroborated(&drifted, &found));
+    let scan = SyntheticWorld::room().scan(&pose(4), 0.005, 99);
+    assert_eq!(revisit.propose(&reference, scan.points(), &pose(4)), None);
+    let found = reanchored(&mut revisit, &reference, &drifted);
+    assert!(!revisit.corroborated(&drifted, &found), "not in a row");
+    let found = reanchored(&mut revisit, &reference, &drifted);
+    assert!(revisit.corroborated(&drifted, &found));
+    // One confirmation takes the first.
+    let mut first = Revisit::new(RevisitParams {
+        confirmations: 1,
+        ..*look_ups().params()
+    });
+    let reference = map(drift, 3, &mut first);
+    let found = reanchored(&mut first, &reference, &drifted);
+    assert!(first.corroborated(&drifted, &found));
 }
