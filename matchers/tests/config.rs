@@ -213,8 +213,7 @@ fn steering_parameters_scale_one_at_a_time() {
             // Integers are rounded to the nearest whole number (2 confirmations × 1.4 → 3).
             let got = scaled.parameter(key).unwrap();
             assert!(
-                (got - v * 1.4).abs() < 1e-12
-                    || (v.fract() == 0.0 && got == (v * 1.4).round()),
+                (got - v * 1.4).abs() < 1e-12 || (v.fract() == 0.0 && got == (v * 1.4).round()),
                 "{kind}: {key} {v} × 1.4 gave {got}"
             );
             // Nothing else moved.
