@@ -17,8 +17,8 @@
 //!    [`Fallback::Refused`](qicp_core::Fallback::Refused)), so the next prediction does not
 //!    start from a match that went astray;
 //! 4. a match odometry contradicts beyond its uncertainty (`max_odometry_chi2`) does not enter
-//!    the map either, and falls back to the prediction where that explains the scan at least
-//!    as well (`veto_falls_back`).
+//!    the map either, and falls back to the prediction unless the points it explains beyond
+//!    the prediction outweigh odometry's disagreement (`veto_falls_back`, `point_evidence`).
 
 use crate::ConfigError;
 use crate::icp::positive;
@@ -70,12 +70,12 @@ pub struct ValidationParams {
     /// to scan too.
     pub max_odometry_chi2: f64,
     /// A match odometry's veto withholds falls back to the prediction (a
-    /// [`Fallback::Refused`](qicp_core::Fallback::Refused)) where the prediction explains at
-    /// least as large a share of the scan: the scans cannot tell the two apart, and odometry
-    /// says the match moved where the robot did not (a slide along a corridor), so the next
-    /// prediction starts from odometry's pose, as after a refusal. Where the match explains
-    /// the scan better (a recovery from odometry gone wrong) it is followed as before. false
-    /// follows every withheld match. Default true.
+    /// [`Fallback::Refused`](qicp_core::Fallback::Refused)) unless the scan tells the two
+    /// apart by enough points to outweigh odometry (`point_evidence`): odometry says the match
+    /// moved where the robot did not (a slide along a corridor, a turn on a few points), so
+    /// the next prediction starts from odometry's pose, as after a refusal. Where the match
+    /// explains the scan by many points more (a recovery from odometry gone wrong) it is
+    /// followed. false follows every withheld match. Default true.
     pub veto_falls_back: bool,
     /// How much one scan point counts against odometry when a withheld match is weighed
     /// against the prediction (`veto_falls_back`): the log-likelihood ratio of a point the
