@@ -276,15 +276,20 @@ fn a_wrong_match_is_searched_again_and_recovered() {
     }
 }
 
-#[test]
-fn idc_is_checked_the_same_way() {
-    let mut pipeline = Pipeline::new(
+/// q-idc built as a typed pipeline with every default, not through the registry.
+fn typed_q_idc() -> Pipeline<Idc<MutualNearest<QuadTree>>, QuadTree> {
+    Pipeline::new(
         "q-idc",
         Idc::<MutualNearest<QuadTree>>::new(IcpParams::default(), IdcParams::default()),
         QuadTree::default(),
         Policy::Boosted(Relevance::default()),
         LaserNoise::default(),
-    );
+    )
+}
+
+#[test]
+fn idc_is_checked_the_same_way() {
+    let mut pipeline = typed_q_idc();
     for k in 0..20 {
         let e = pipeline.process(&record(k, truth(k)));
         let (dist, deg) = error(&e.pose, k);
@@ -519,13 +524,7 @@ fn q_idc_gates_its_map_by_novelty_by_default_and_stops_its_growth_over_ten_loops
         "{gated:?} {open:?}"
     );
     // A typed pipeline takes the matcher's own default, as the registry's does.
-    let mut typed = Pipeline::new(
-        "q-idc",
-        Idc::<MutualNearest<QuadTree>>::new(IcpParams::default(), IdcParams::default()),
-        QuadTree::default(),
-        Policy::Boosted(Relevance::default()),
-        LaserNoise::default(),
-    );
+    let mut typed = typed_q_idc();
     let sizes = loop_sizes_of(&mut typed, 10);
     assert!(
         sizes[9] as f64 <= 1.05 * sizes[0] as f64,
