@@ -13,8 +13,8 @@
 //! only. Where some pose of the window explains the scan in the old map well (a score of at
 //! least 1 − `max_miss`) and by `min_gain` better than the match does, ICP is run again from
 //! that pose against the whole map, without the odometry prior, and its result replaces the
-//! match if the old map still explains it as well and the look-up before found the same
-//! correction (`confirmations`). The re-anchored match is not withheld by odometry's veto: it
+//! match if the old map still explains it as well and a recent look-up found the same
+//! correction (`confirmations`, `confirm_gap`). The re-anchored match is not withheld by odometry's veto: it
 //! corrects drift that odometry cannot see.
 //!
 //! This is a local correction, not a loop closure: the drifted stretch of map stays where it
@@ -55,12 +55,19 @@ pub struct RevisitParams {
     /// Half-width of the rotation window (deg). Default 3: a heading error larger than this
     /// over a loop leaves the old map too far off for a local correction to be trusted.
     pub window_deg: f64,
-    /// A re-anchoring is taken only once this many look-ups in a row (one every `every`
-    /// matched scans) have each found it, their corrections of the match agreeing within
-    /// [`AGREE_XY`] and [`AGREE_DEG`]: a lone look-up that the old map answers elsewhere is
-    /// aliasing (a stretch of corridor, a room like another), as place recognition asks for
-    /// consecutive detections before it closes a loop. Default 2; 1 re-anchors on the first.
+    /// A re-anchoring is taken only once this many look-ups (one every `every` matched
+    /// scans) have each found it, their corrections of the match agreeing within
+    /// [`AGREE_XY`] and [`AGREE_DEG`], with at most `confirm_gap` look-ups between each two:
+    /// a lone look-up that the old map answers elsewhere is aliasing (a stretch of corridor,
+    /// a room like another), as place recognition asks for repeated detections before it
+    /// closes a loop. Default 2; 1 re-anchors on the first.
     pub confirmations: usize,
+    /// Look-ups that find no pose tolerated between two that confirm each other (the M-of-N
+    /// confirmation of target tracking): a scan that sees only walls fitting the old map and
+    /// its drifted copy alike, or too little of the old map, neither confirms a correction
+    /// nor contradicts it. A look-up that finds another correction starts the count again.
+    /// Default 8 (40 matched scans at `every` = 5); 0 asks for look-ups strictly in a row.
+    pub confirm_gap: usize,
 }
 
 /// Two look-ups' corrections agree when, applied to the same match, they differ by less
@@ -80,6 +87,7 @@ impl Default for RevisitParams {
             window_xy: 1.0,
             window_deg: 3.0,
             confirmations: 2,
+            confirm_gap: 8,
         }
     }
 }
@@ -101,6 +109,12 @@ impl RevisitParams {
             return Err(ConfigError::invalid(
                 "matcher.revisit.confirmations",
                 format!("{} must be in 1..=100", self.confirmations),
+            ));
+        }
+        if self.confirm_gap > 1_000 {
+            return Err(ConfigError::invalid(
+                "matcher.revisit.confirm_gap",
+                format!("{} must be in 0..=1000", self.confirm_gap),
             ));
         }
         if !(1..=1_000_000).contains(&self.every) {
@@ -232,14 +246,15 @@ impl Revisit {
     }
 
     /// Counts a confirmed re-anchoring of the match `matched` to `reanchored` found by this
-    /// look-up, and tells whether it is to be taken: once `confirmations` look-ups in a row
-    /// have found corrections that agree (see [`RevisitParams::confirmations`]).
+    /// look-up, and tells whether it is to be taken: once `confirmations` look-ups, at most
+    /// `confirm_gap` look-ups apart, have found corrections that agree (see
+    /// [`RevisitParams::confirmations`]).
     pub fn corroborated(&mut self, matched: &Pose2, reanchored: &Pose2) -> bool {
         let now = self.matched;
-        let every = self.params.every;
+        let reach = self.params.every * (self.params.confirm_gap + 1);
         let agrees = |(at, correction, _): &(usize, Pose2, usize)| {
             let expected = *correction * *matched;
-            at + every == now
+            now.saturating_sub(*at) <= reach
                 && expected.distance(reanchored) < AGREE_XY
                 && qicp_core::normalize_angle(expected.theta - reanchored.theta).abs()
                     < AGREE_DEG.to_radians()

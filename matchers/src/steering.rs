@@ -42,6 +42,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("revisit.window_xy", Acts::Map),
     ("revisit.window_deg", Acts::Map),
     ("revisit.confirmations", Acts::Map),
+    ("revisit.confirm_gap", Acts::Map),
 ];
 
 /// Steering parameters that act only through another one: each is left out of the sweep

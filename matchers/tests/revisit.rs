@@ -120,6 +120,7 @@ fn revisit_values_out_of_range_are_refused_with_their_key() {
         ("age_scans", "0"),
         ("every", "0"),
         ("confirmations", "0"),
+        ("confirm_gap", "1001"),
     ] {
         let text = format!("[matcher]\nkind = \"q-wsm\"\n[matcher.revisit]\n{key} = {value}\n");
         let err = Registry::builtin()
@@ -147,12 +148,17 @@ fn reanchored(revisit: &mut Revisit, reference: &Reference<QuadTree>, drifted: &
 }
 
 #[test]
-fn a_reanchoring_is_taken_once_consecutive_look_ups_agree_on_it() {
+fn a_reanchoring_is_taken_once_look_ups_close_together_agree_on_it() {
     let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
     let drifted = drift * pose(4);
+    let scan = SyntheticWorld::room().scan(&pose(4), 0.005, 99);
+    // A look-up that finds no pose: the scan at its true pose fits the old map.
+    let finds_nothing = |revisit: &mut Revisit, reference: &Reference<QuadTree>| {
+        assert_eq!(revisit.propose(reference, scan.points(), &pose(4)), None);
+    };
     let mut revisit = look_ups();
     let reference = map(drift, 3, &mut revisit);
-    // The first look-up finds it; the default asks for a second in a row.
+    // The first look-up finds it; the default asks for a second that agrees.
     let found = reanchored(&mut revisit, &reference, &drifted);
     assert!(!revisit.corroborated(&drifted, &found));
     let again = reanchored(&mut revisit, &reference, &drifted);
@@ -162,15 +168,45 @@ fn a_reanchoring_is_taken_once_consecutive_look_ups_agree_on_it() {
     assert!(!revisit.corroborated(&drifted, &found));
     let elsewhere = Pose2::new(0.3, 0.0, 0.0) * reanchored(&mut revisit, &reference, &drifted);
     assert!(!revisit.corroborated(&drifted, &elsewhere), "0.3 m apart");
-    // A look-up that finds nothing between two that agree breaks the run.
+    // Up to `confirm_gap` look-ups that find nothing between two that agree neither confirm
+    // nor break the run…
+    let gap = revisit.params().confirm_gap;
+    assert_eq!(gap, 8);
     let found = reanchored(&mut revisit, &reference, &drifted);
     assert!(!revisit.corroborated(&drifted, &found));
-    let scan = SyntheticWorld::room().scan(&pose(4), 0.005, 99);
-    assert_eq!(revisit.propose(&reference, scan.points(), &pose(4)), None);
+    for _ in 0..gap {
+        finds_nothing(&mut revisit, &reference);
+    }
     let found = reanchored(&mut revisit, &reference, &drifted);
-    assert!(!revisit.corroborated(&drifted, &found), "not in a row");
+    assert!(
+        revisit.corroborated(&drifted, &found),
+        "{gap} look-ups apart"
+    );
+    // … one more does.
     let found = reanchored(&mut revisit, &reference, &drifted);
-    assert!(revisit.corroborated(&drifted, &found));
+    assert!(!revisit.corroborated(&drifted, &found));
+    for _ in 0..=gap {
+        finds_nothing(&mut revisit, &reference);
+    }
+    let found = reanchored(&mut revisit, &reference, &drifted);
+    assert!(
+        !revisit.corroborated(&drifted, &found),
+        "{} look-ups apart",
+        gap + 1
+    );
+    // `confirm_gap = 0` asks for look-ups strictly in a row.
+    let mut in_a_row = Revisit::new(RevisitParams {
+        confirm_gap: 0,
+        ..*look_ups().params()
+    });
+    let reference = map(drift, 3, &mut in_a_row);
+    let found = reanchored(&mut in_a_row, &reference, &drifted);
+    assert!(!in_a_row.corroborated(&drifted, &found));
+    finds_nothing(&mut in_a_row, &reference);
+    let found = reanchored(&mut in_a_row, &reference, &drifted);
+    assert!(!in_a_row.corroborated(&drifted, &found), "not in a row");
+    let found = reanchored(&mut in_a_row, &reference, &drifted);
+    assert!(in_a_row.corroborated(&drifted, &found));
     // One confirmation takes the first.
     let mut first = Revisit::new(RevisitParams {
         confirmations: 1,
