@@ -14,8 +14,8 @@
 //! least 1 − `max_miss`) and by `min_gain` better than the match does, ICP is run again from
 //! that pose against the whole map, without the odometry prior, and its result replaces the
 //! match if the old map still explains it as well and a recent look-up found the same
-//! correction (`confirmations`, `confirm_gap`). The re-anchored match is not withheld by odometry's veto: it
-//! corrects drift that odometry cannot see.
+//! correction (`confirmations`, `confirm_gap`). The re-anchored match is not withheld by
+//! odometry's veto: it corrects drift that odometry cannot see.
 //!
 //! This is a local correction, not a loop closure: the drifted stretch of map stays where it
 //! was laid, and the estimate jumps by the drift. It helps where the drift is small enough to
