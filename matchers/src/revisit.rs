@@ -62,11 +62,13 @@ pub struct RevisitParams {
     /// a room like another), as place recognition asks for repeated detections before it
     /// closes a loop. Default 2; 1 re-anchors on the first.
     pub confirmations: usize,
-    /// Look-ups that find no pose tolerated between two that confirm each other (the M-of-N
-    /// confirmation of target tracking): a scan that sees only walls fitting the old map and
-    /// its drifted copy alike, or too little of the old map, neither confirms a correction
-    /// nor contradicts it. A look-up that finds another correction starts the count again.
-    /// Default 8 (40 matched scans at `every` = 5); 0 asks for look-ups strictly in a row.
+    /// Look-ups that find no confirmed pose tolerated between two that confirm each other
+    /// (the M-of-N confirmation of target tracking): a scan that sees only walls fitting the
+    /// old map and its drifted copy alike, or too little of the old map, neither confirms a
+    /// correction nor contradicts it, and neither does a proposal that ICP's refinement or
+    /// the old map's score then rejects. A confirmed look-up that finds another correction
+    /// starts the count again. Default 8: two agreeing look-ups at most 45 matched scans
+    /// apart at `every` = 5; 0 asks for look-ups strictly in a row.
     pub confirm_gap: usize,
 }
 
@@ -246,12 +248,16 @@ impl Revisit {
     }
 
     /// Counts a confirmed re-anchoring of the match `matched` to `reanchored` found by this
-    /// look-up, and tells whether it is to be taken: once `confirmations` look-ups, at most
-    /// `confirm_gap` look-ups apart, have found corrections that agree (see
-    /// [`RevisitParams::confirmations`]).
+    /// look-up, and tells whether it is to be taken: once `confirmations` look-ups, with at
+    /// most `confirm_gap` look-ups between each two, have found corrections that agree (see
+    /// [`RevisitParams::confirm_gap`]).
     pub fn corroborated(&mut self, matched: &Pose2, reanchored: &Pose2) -> bool {
         let now = self.matched;
-        let reach = self.params.every * (self.params.confirm_gap + 1);
+        // In matched scans; saturating, as a `Revisit` built directly is not validated.
+        let reach = self
+            .params
+            .every
+            .saturating_mul(self.params.confirm_gap.saturating_add(1));
         let agrees = |(at, correction, _): &(usize, Pose2, usize)| {
             let expected = *correction * *matched;
             now.saturating_sub(*at) <= reach

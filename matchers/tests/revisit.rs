@@ -180,7 +180,7 @@ fn a_reanchoring_is_taken_once_look_ups_close_together_agree_on_it() {
     let found = reanchored(&mut revisit, &reference, &drifted);
     assert!(
         revisit.corroborated(&drifted, &found),
-        "{gap} look-ups apart"
+        "{gap} look-ups between"
     );
     // … one more does.
     let found = reanchored(&mut revisit, &reference, &drifted);
@@ -191,7 +191,7 @@ fn a_reanchoring_is_taken_once_look_ups_close_together_agree_on_it() {
     let found = reanchored(&mut revisit, &reference, &drifted);
     assert!(
         !revisit.corroborated(&drifted, &found),
-        "{} look-ups apart",
+        "{} look-ups between",
         gap + 1
     );
     // `confirm_gap = 0` asks for look-ups strictly in a row.
@@ -207,6 +207,35 @@ fn a_reanchoring_is_taken_once_look_ups_close_together_agree_on_it() {
     assert!(!in_a_row.corroborated(&drifted, &found), "not in a row");
     let found = reanchored(&mut in_a_row, &reference, &drifted);
     assert!(in_a_row.corroborated(&drifted, &found));
+    // The gap counts look-ups, one every `every` matched scans, not matched scans: at
+    // `every` = 5 and `confirm_gap` = 1 two look-ups agree across one that finds nothing
+    // (ten matched scans apart), not across two (fifteen).
+    let mut sparse = Revisit::new(RevisitParams {
+        every: 5,
+        confirm_gap: 1,
+        ..*look_ups().params()
+    });
+    let reference = map(drift, 3, &mut sparse);
+    let mut matched_scans = |revisit: &mut Revisit, n: usize| {
+        for _ in 0..n {
+            finds_nothing(revisit, &reference);
+        }
+    };
+    matched_scans(&mut sparse, 4);
+    let found = reanchored(&mut sparse, &reference, &drifted);
+    assert!(!sparse.corroborated(&drifted, &found));
+    matched_scans(&mut sparse, 9);
+    let found = reanchored(&mut sparse, &reference, &drifted);
+    assert!(sparse.corroborated(&drifted, &found), "one look-up between");
+    matched_scans(&mut sparse, 4);
+    let found = reanchored(&mut sparse, &reference, &drifted);
+    assert!(!sparse.corroborated(&drifted, &found));
+    matched_scans(&mut sparse, 14);
+    let found = reanchored(&mut sparse, &reference, &drifted);
+    assert!(
+        !sparse.corroborated(&drifted, &found),
+        "two look-ups between"
+    );
     // One confirmation takes the first.
     let mut first = Revisit::new(RevisitParams {
         confirmations: 1,
