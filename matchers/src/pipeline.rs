@@ -659,9 +659,10 @@ where
             && let Some(lambda) = prior
         {
             let local = record.scan.points();
-            let gained = (check.inlier_share
-                - self.validator.inlier_share(&self.reference, local, &guess))
-                * local.len() as f64;
+            let gained = || {
+                (check.inlier_share - self.validator.inlier_share(&self.reference, local, &guess))
+                    * local.len() as f64
+            };
             if !self
                 .validator
                 .outweighs_odometry(gained, &lambda, &guess, &result.pose)

@@ -269,19 +269,23 @@ impl Validator {
     /// prediction ([`ValidationParams::veto_falls_back`]): when the scan points it explains
     /// beyond the prediction (`gained`, which may be negative), each worth
     /// [`ValidationParams::point_evidence`], outweigh half the χ² of its disagreement with
-    /// odometry under the prior information `lambda`. Always true when the fall-back is off.
+    /// odometry under the prior information `lambda`. Always true when the fall-back is off;
+    /// `gained` is counted only when it is on.
     #[must_use]
     pub fn outweighs_odometry(
         &self,
-        gained: f64,
+        gained: impl FnOnce() -> f64,
         lambda: &Matrix3<f64>,
         predicted: &Pose2,
         matched: &Pose2,
     ) -> bool {
-        !self.params.veto_falls_back
-            || (gained > 0.0
-                && gained * self.params.point_evidence
-                    >= 0.5 * odometry_chi2(lambda, predicted, matched))
+        if !self.params.veto_falls_back {
+            return true;
+        }
+        let gained = gained();
+        gained > 0.0
+            && gained * self.params.point_evidence
+                >= 0.5 * odometry_chi2(lambda, predicted, matched)
     }
 
     /// Share of `local` (scan points, laser frame) within `inlier_distance` of the reference
@@ -478,19 +482,26 @@ mod tests {
         let predicted = Pose2::IDENTITY;
         let turned = |deg: f64| Pose2::new(0.0, 0.0, deg.to_radians());
         // 33° off (χ² ≈ 1089): one point more is not enough, 200 are.
-        assert!(!v.outweighs_odometry(1.0, &lambda, &predicted, &turned(33.0)));
-        assert!(v.outweighs_odometry(200.0, &lambda, &predicted, &turned(33.0)));
+        assert!(!v.outweighs_odometry(|| 1.0, &lambda, &predicted, &turned(33.0)));
+        assert!(v.outweighs_odometry(|| 200.0, &lambda, &predicted, &turned(33.0)));
         // 5° off (χ² 25): three points more (3 × 5 ≥ 12.5) are.
-        assert!(v.outweighs_odometry(3.0, &lambda, &predicted, &turned(5.0)));
-        assert!(!v.outweighs_odometry(2.0, &lambda, &predicted, &turned(5.0)));
+        assert!(v.outweighs_odometry(|| 3.0, &lambda, &predicted, &turned(5.0)));
+        assert!(!v.outweighs_odometry(|| 2.0, &lambda, &predicted, &turned(5.0)));
         // None gained, or fewer: odometry's pose stands, however slight the disagreement.
-        assert!(!v.outweighs_odometry(0.0, &lambda, &predicted, &turned(4.1)));
-        assert!(!v.outweighs_odometry(-3.0, &lambda, &predicted, &turned(4.1)));
+        assert!(!v.outweighs_odometry(|| 0.0, &lambda, &predicted, &turned(4.1)));
+        assert!(!v.outweighs_odometry(|| -3.0, &lambda, &predicted, &turned(4.1)));
         // With the fall-back off every withheld match is followed.
         let follow = Validator::new(ValidationParams {
             veto_falls_back: false,
             ..ValidationParams::default()
         });
-        assert!(follow.outweighs_odometry(-3.0, &lambda, &predicted, &turned(33.0)));
+        assert!(follow.outweighs_odometry(|| -3.0, &lambda, &predicted, &turned(33.0)));
+        // … without counting the points.
+        assert!(follow.outweighs_odometry(
+            || unreachable!("counted with the fall-back off"),
+            &lambda,
+            &predicted,
+            &turned(33.0)
+        ));
     }
 }
