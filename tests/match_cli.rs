@@ -31,7 +31,7 @@ fn corridor_log(test: &str) -> PathBuf {
         "sim",
         config,
         "--out",
-        dir.to_str().unwrap(),
+        dir.to_str().expect("temporary paths are UTF-8"),
         "--max-scans",
         "60",
     ]);

@@ -62,7 +62,7 @@ fn check<M: SpatialIndex + Default, S: SpatialIndex + Default>(scale: f64) {
         .collect();
     let mut map = M::default();
     for p in &map_points {
-        map.insert(*p).unwrap();
+        map.insert(*p).expect("finite point");
     }
     let mut r = SplitMix::new(5);
     let mut compared = 0;
@@ -128,7 +128,7 @@ fn check_new_reference<M: SpatialIndex + Default>() {
     for points in [&first, &second] {
         let mut map = M::default();
         for p in points.iter() {
-            map.insert(*p).unwrap();
+            map.insert(*p).expect("finite point");
         }
         metric.pair(&map, &query, &mut pairs);
         let got: Vec<(u32, f64)> = pairs.iter().map(|p| (p.scan, p.dist_sq)).collect();

@@ -61,7 +61,7 @@ fn recovers_known_motion<M: ScanMatcher, I: SpatialIndex + Default>(mut matcher:
         let mut reference = Reference::new(I::default());
         reference
             .insert_scan(&before, &Pose2::IDENTITY, None)
-            .unwrap();
+            .expect("finite scan");
         for error in guess_errors() {
             let guess = case.motion * error;
             let r = matcher.match_scan(&reference, &after, guess);
@@ -92,7 +92,7 @@ fn recovers_pose_in_map<M: ScanMatcher, I: SpatialIndex + Default>(mut matcher: 
                 &pose,
                 Some(Merge::spacing(0.02)),
             )
-            .unwrap();
+            .expect("finite scan");
             pose = pose * Pose2::new(0.2, 0.0, 0.03);
         }
         let truth = pose * case.motion;

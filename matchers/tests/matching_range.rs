@@ -50,7 +50,7 @@ fn check<I: SpatialIndex + Default>() {
     let map_points = laser_scans(20_000, 5);
     let mut map = I::default();
     for p in &map_points {
-        map.insert(*p).unwrap();
+        map.insert(*p).expect("finite point");
     }
     let mut rng = SplitMix::new(42);
     let mut rule = MatchingRange::default();

@@ -216,7 +216,7 @@ fn a_reanchoring_is_taken_once_look_ups_close_together_agree_on_it() {
         ..*look_ups().params()
     });
     let reference = map(drift, 3, &mut sparse);
-    let mut matched_scans = |revisit: &mut Revisit, n: usize| {
+    let matched_scans = |revisit: &mut Revisit, n: usize| {
         for _ in 0..n {
             finds_nothing(revisit, &reference);
         }

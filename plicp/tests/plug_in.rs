@@ -82,7 +82,11 @@ fn each_first_gate_is_swept_only_on_the_reference_it_acts_on() {
 
 fn drive(kind: &str) -> Vec<Pose2> {
     let world = SyntheticWorld::room();
-    let mut pipeline = registry().config(kind).unwrap().build().unwrap();
+    let mut pipeline = registry()
+        .config(kind)
+        .expect("a registered kind")
+        .build()
+        .expect("a valid default config");
     let mut out = Vec::new();
     for k in 0..40 {
         let truth = Pose2::new(
