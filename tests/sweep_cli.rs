@@ -115,6 +115,24 @@ fn sweep_reports_the_default_and_each_variant_with_consistent_ratios() {
         variants[0]["scans"], 1500,
         "scans/2 keeps every second record"
     );
+    // scans/2 is scored on the relations between records it kept, at their own times; the
+    // others are missing, not scored with the pose of the record beside a dropped one, which
+    // charged it for the motion in between (about a third of the relations have both ends on
+    // kept records, where the 0.1 s window scored two thirds).
+    let count = |v: &serde_json::Value, key: &str| v[key].as_u64().unwrap_or(0);
+    let halved = &variants[0];
+    assert_eq!(
+        count(halved, "relations") + count(halved, "relations_missing"),
+        count(default, "relations") + count(default, "relations_missing")
+    );
+    assert!(
+        2 * count(halved, "relations") < count(default, "relations"),
+        "{halved}"
+    );
+    assert_eq!(
+        count(&variants[1], "relations"),
+        count(default, "relations")
+    );
     ratios.sort_by(f64::total_cmp);
     assert_eq!(f(&report["worst_ratio"]), ratios[2]);
     assert_eq!(f(&report["median_ratio"]), ratios[1]);

@@ -23,7 +23,8 @@ pub use ate::{
 pub use load::{LogPoses, load_trajectory};
 pub mod stats;
 pub use relations::{
-    RelationError, RelationProbe, RelationsReport, evaluate_relations, relation_errors,
+    RelationError, RelationProbe, RelationsReport, SNAPPED_MAX_DT, evaluate_relations,
+    relation_errors,
 };
 pub(crate) use stats::summary as stats;
 
@@ -207,6 +208,51 @@ mod tests {
             probe.push(f64::NAN, Pose2::IDENTITY),
             Err(EvalError::OutOfOrder { .. })
         ));
+    }
+
+    /// Snapping moves each relation time onto the record the probe matched it to, so that a
+    /// run holding only some records is scored on those alone: on a straight drive of a record
+    /// every 0.05 s, a perfect run of the even records scores exactly zero on the snapped
+    /// relations, where the nearest-pose window of 0.1 s would charge it for the odd records'
+    /// neighbours.
+    #[test]
+    fn snapped_relations_score_a_run_on_the_records_it_has_not_their_neighbours() {
+        let records: Vec<Stamped> = (0..40)
+            .map(|i| (0.05 * i as f64, Pose2::new(0.02 * i as f64, 0.0, 0.0)))
+            .collect();
+        // Relations a few milliseconds off the records' times (as another tool may write
+        // them), ten records apart; one more far beyond the log.
+        let mut relations: Vec<Relation> = (0..30)
+            .map(|i| Relation {
+                t1: 0.05 * i as f64 + 0.003,
+                t2: 0.05 * (i + 10) as f64 - 0.002,
+                delta: Pose2::new(0.2, 0.0, 0.0),
+            })
+            .collect();
+        relations.push(Relation {
+            t1: 100.0,
+            t2: 101.0,
+            delta: Pose2::IDENTITY,
+        });
+        let mut probe = RelationProbe::new(&relations, 0.1).unwrap();
+        for (t, p) in &records {
+            probe.push(*t, *p).unwrap();
+        }
+        let snapped = probe.snap(&relations);
+        for (i, r) in snapped.iter().take(30).enumerate() {
+            assert_eq!((r.t1, r.t2), (records[i].0, records[i + 10].0));
+        }
+        assert_eq!((snapped[30].t1, snapped[30].t2), (100.0, 101.0));
+        // Every second record, estimated perfectly.
+        let even: Vec<Stamped> = records.iter().step_by(2).copied().collect();
+        let exact = evaluate_relations(&even, &snapped, SNAPPED_MAX_DT).unwrap();
+        assert_eq!(exact.n, 15, "relations between two even records");
+        assert_eq!(exact.missing, 16);
+        assert!(exact.trans_max < 1e-12, "{exact:?}");
+        // The wide window pairs an odd record's relation with its neighbour, 2 cm away.
+        let near = evaluate_relations(&even, &relations, 0.1).unwrap();
+        assert_eq!(near.n, 30);
+        assert!(near.trans_mean > 0.01, "{near:?}");
     }
 
     /// A drive along a gently curving path, one pose every 0.1 s.

@@ -89,6 +89,11 @@ pub fn relation_errors(
     Ok((errors, missing))
 }
 
+/// Association window (s) of relations whose times are records' own ([`RelationProbe::snap`]):
+/// wide enough for a time written to a file and read back, far narrower than any laser's
+/// record spacing.
+pub const SNAPPED_MAX_DT: f64 = 1e-6;
+
 /// Picks from a streamed trajectory the poses that relations need, so that a long run is
 /// scored in memory that grows with the relations, not with the poses.
 ///
@@ -157,6 +162,30 @@ impl RelationProbe {
     #[must_use]
     pub fn all_before(&self, t: f64) -> bool {
         self.times.last().is_none_or(|&last| last < t - self.max_dt)
+    }
+
+    /// `relations` with each time moved to the time of the pose picked for it, where one was:
+    /// fed the log's records, the record each relation is about. A run that matched only some
+    /// records (every second one, say) is then scored on the records it has, within a window
+    /// narrower than their spacing ([`SNAPPED_MAX_DT`]), never with a neighbour's pose as if it
+    /// were taken at the relation's time. A time with no pose is kept as it is.
+    #[must_use]
+    pub fn snap(&self, relations: &[Relation]) -> Vec<Relation> {
+        let at = |t: f64| {
+            self.times
+                .binary_search_by(|w| w.total_cmp(&t))
+                .ok()
+                .and_then(|i| self.best[i])
+                .map_or(t, |(s, _)| s)
+        };
+        relations
+            .iter()
+            .map(|r| Relation {
+                t1: at(r.t1),
+                t2: at(r.t2),
+                ..*r
+            })
+            .collect()
     }
 
     /// The poses picked, in time order.

@@ -20,7 +20,9 @@ use crate::matching::MatchLoop;
 use anyhow::{Context, Result, bail};
 use qicp_core::{BeamGeometry, BeamStatus, Pose2, Record, Scan, ScanError};
 use qicp_eval::stats::median;
-use qicp_eval::{RelationError, RelationProbe, evaluate_relations, relation_errors};
+use qicp_eval::{
+    RelationError, RelationProbe, SNAPPED_MAX_DT, evaluate_relations, relation_errors,
+};
 use qicp_io::carmen::CarmenOptions;
 use qicp_io::relations::{Relation, read_relations};
 use qicp_io::tum::Stamped;
@@ -42,7 +44,11 @@ pub use perturb::*;
 pub use running::*;
 pub use variants::*;
 
-/// Association window (s) of the relations: as `qicp match --relations`.
+/// Association window (s) of a relation's time with the log's records, as `qicp match
+/// --relations` uses it. The relations are then moved onto those records' own times, and every
+/// run is scored on the records it matched ([`SNAPPED_MAX_DT`]): `scans/2` has no pose for the
+/// records it drops, and the pose of the record beside one, up to this far away, would add
+/// the robot's motion in between to the variant's error.
 pub const MAX_DT: f64 = 0.1;
 /// A relation whose translational error exceeds this (m) counts as a failure.
 pub const FAILURE_M: f64 = 0.5;
@@ -462,6 +468,7 @@ impl SweepInput {
             probe.push(t, odometry).map_err(anyhow::Error::from)
         })?;
         let (found, _) = relation_errors(&probe.trajectory(), &relations, MAX_DT)?;
+        let relations = probe.snap(&relations);
         if found.is_empty() {
             bail!(
                 "none of the {} relations of {relations_name} falls within the {count} scans \
@@ -498,13 +505,16 @@ impl SweepInput {
         // Segments end on records every variant keeps (`scans/2` keeps the even ones), as
         // against the default run: the reference's pose nearest each such record's time.
         let mut kept = Vec::new();
+        let mut last_taken: Option<Stamped> = None;
         let mut k = 0usize;
         let (count, span) = count_records(log, &options, scans, |t, _| {
+            // Drawn at the record's own time, which every run is scored at.
             if k.is_multiple_of(2)
                 && let Some(&pose) = nearest_within(&trajectory, t, MAX_DT)
-                && kept.last() != Some(&pose)
+                && last_taken != Some(pose)
             {
-                kept.push(pose);
+                kept.push((t, pose.1));
+                last_taken = Some(pose);
             }
             k += 1;
             Ok(())

@@ -144,7 +144,7 @@ impl Job {
             Some(v) => Box::new(v.stream(records)),
         };
         let mut matcher = MatchLoop::new(config)?;
-        let mut probe = RelationProbe::new(relations, MAX_DT)?;
+        let mut probe = RelationProbe::new(relations, SNAPPED_MAX_DT)?;
         for record in records {
             let record = record?;
             let (estimate, _) = matcher.push(&record);
@@ -178,8 +178,8 @@ impl RunFigures {
     /// Scores `trajectory` (the poses at the relations' times, or more) with `relations`:
     /// sets the error figures and the relation counts.
     pub fn score(&mut self, trajectory: &[Stamped], relations: &[Relation]) -> Result<()> {
-        let report = evaluate_relations(trajectory, relations, MAX_DT)?;
-        let (errors, _) = relation_errors(trajectory, relations, MAX_DT)?;
+        let report = evaluate_relations(trajectory, relations, SNAPPED_MAX_DT)?;
+        let (errors, _) = relation_errors(trajectory, relations, SNAPPED_MAX_DT)?;
         self.trans_mean = report.trans_mean;
         self.trans_max = report.trans_max;
         self.rot_mean_deg = report.rot_mean_deg;
