@@ -21,10 +21,10 @@ pub enum Fallback {
     EmptyReference,
     /// The least-squares system was singular or produced a non-finite step.
     Degenerate,
-    /// The match was refused by validation (it explained the scan worse than the recent
-    /// level, or odometry contradicted it beyond its uncertainty) and the initial guess
-    /// explains the scan at least as well, so the guess stands (see the matchers'
-    /// validation).
+    /// The match was refused by validation and the initial guess stands (see the matchers'
+    /// validation): it explained the scan worse than the recent level and the guess explains
+    /// it at least as well, or odometry contradicted it beyond its uncertainty and the points
+    /// it explains beyond the guess's do not outweigh that disagreement.
     Refused,
 }
 

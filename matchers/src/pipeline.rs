@@ -395,6 +395,36 @@ struct OdometryRun {
     contradicted: bool,
 }
 
+impl OdometryRun {
+    /// Extends `run` by a record whose reading repeats the previous one (`!fresh`), or starts a
+    /// new run at it (`laser`). A re-anchored record starts a run of its own: a restart after
+    /// a stall must not go back to a pose from before the correction.
+    fn follow(
+        run: &mut Option<Self>,
+        fresh: bool,
+        check: &Check,
+        contradicted: bool,
+        laser: Pose2,
+    ) {
+        match run {
+            Some(run) if !fresh && !check.reanchored => run.contradicted |= contradicted,
+            _ => {
+                *run = Some(Self {
+                    start: laser,
+                    contradicted: false,
+                });
+            }
+        }
+    }
+}
+
+/// Whether an accepted match's motion from the previous pose is the robot's own, for the
+/// odometry calibration to learn: not refused, not withheld, and not re-anchored (a
+/// re-anchored pose holds the drift it corrects, which is no motion of the wheels).
+fn shows_wheel_motion(check: &Check) -> bool {
+    !(check.refused || check.withheld || check.reanchored)
+}
+
 /// A matcher `M` with a reference held in index `I`.
 #[derive(Debug)]
 pub struct Pipeline<M, I> {
@@ -678,20 +708,11 @@ where
         }
         if let Some(before) = base
             && result.fallback.is_none()
-            && !check.refused
-            && !check.withheld
+            && shows_wheel_motion(&check)
         {
             self.calibration.learn(&raw, &before.between(&laser));
         }
-        match &mut self.run {
-            Some(run) if !fresh => run.contradicted |= contradicted,
-            _ => {
-                self.run = Some(OdometryRun {
-                    start: laser,
-                    contradicted: false,
-                });
-            }
-        }
+        OdometryRun::follow(&mut self.run, fresh, &check, contradicted, laser);
         self.last = Some((record.odometry, laser));
         Estimate {
             pose: laser * offset.inverse(),
@@ -707,5 +728,41 @@ where
 
     fn live_points(&self) -> Vec<Point2<f64>> {
         self.reference.live_points()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_reanchoring_is_not_learnt_as_wheel_motion() {
+        assert!(shows_wheel_motion(&Check::UNCHECKED));
+        for flag in 0..3 {
+            let mut check = Check::UNCHECKED;
+            match flag {
+                0 => check.refused = true,
+                1 => check.withheld = true,
+                _ => check.reanchored = true,
+            }
+            assert!(!shows_wheel_motion(&check), "{check:?}");
+        }
+    }
+
+    #[test]
+    fn a_reanchoring_during_a_stall_starts_a_new_odometry_run() {
+        let (before, corrected) = (Pose2::new(1.0, 0.0, 0.0), Pose2::new(1.4, 0.2, 0.05));
+        let mut run = None;
+        OdometryRun::follow(&mut run, true, &Check::UNCHECKED, false, before);
+        // The reading repeats and a match contradicts it: the stall's run holds on.
+        OdometryRun::follow(&mut run, false, &Check::UNCHECKED, true, before);
+        assert!(run.is_some_and(|r| r.contradicted && r.start == before));
+        // A re-anchoring with the reading still repeated starts a run at the corrected pose.
+        let reanchored = Check {
+            reanchored: true,
+            ..Check::UNCHECKED
+        };
+        OdometryRun::follow(&mut run, false, &reanchored, false, corrected);
+        assert!(run.is_some_and(|r| !r.contradicted && r.start == corrected));
     }
 }

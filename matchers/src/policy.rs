@@ -183,8 +183,10 @@ impl ReferencePolicy for ScanPolicy {
         let matched = m.result.fallback.is_none();
         let relevant = is_relevant(&self.relevance, self.last_inserted, &m.laser);
         // A scan that could not be matched against the reference replaces it: the robot has
-        // left what the old one saw.
-        if !(enough_points(m.scan) && (relevant || !matched)) {
+        // left what the old one saw. Not one too sparse to be matched at all (fewer valid
+        // beams than the matcher's minimum): the next scan would find nothing in it either.
+        let too_sparse = matches!(m.result.fallback, Some(Fallback::TooFewPoints { .. }));
+        if !(enough_points(m.scan) && !too_sparse && (relevant || !matched)) {
             return false;
         }
         reference.clear();

@@ -37,7 +37,7 @@ pub struct RevisitParams {
     /// How old a map point must be to count as the old map, in relevant scans: a point is
     /// old once `age_scans` − 1 scans have entered the map after the one that brought it.
     /// Default 100: on the Freiburg logs 25-50 m of driving, well beyond the stretch a scan
-    /// overlaps while exploring.
+    /// overlaps while exploring. At least 1 (a [`Revisit::new`] given 0 takes 1).
     pub age_scans: usize,
     /// Every this many matched scans one is looked up in the old map. Default 5. A cost
     /// knob: each look builds a raster of the old map around the scan.
@@ -181,7 +181,10 @@ pub struct Revisit {
 impl Revisit {
     /// Look-ups with the given parameters.
     #[must_use]
-    pub fn new(params: RevisitParams) -> Self {
+    pub fn new(mut params: RevisitParams) -> Self {
+        // Built directly, the parameters are not validated: an age of 0 would leave no old
+        // map to look up (nor an index to read its length at).
+        params.age_scans = params.age_scans.max(1);
         Self {
             params,
             search: CorrelativeSearch::new(params.search()),

@@ -7,12 +7,14 @@
 //! normal there, and a drop against the level is what marks a wrong match):
 //!
 //! 1. a match whose share falls more than `max_share_drop` below the running median share
-//!    (as a fraction of it) is suspect, and so is one left with more than `max_pair_drop`
-//!    fewer pairs than the running median of recent matches';
+//!    (as a fraction of it) is suspect, and so is one whose residual exceeds
+//!    `max_residual_ratio` times the running median residual, or one left with more than
+//!    `max_pair_drop` fewer pairs than the running median of recent matches';
 //! 2. a suspect match is searched again: a correlative search over a window around the
-//!    prediction ([`crate::correlative`]) gives ICP a new start, and the better of the two
-//!    results is kept;
-//! 3. a match still below the level does not enter the map; where the prediction explains
+//!    prediction ([`crate::correlative`]) gives ICP a new start, and the new match replaces
+//!    the first only if it explains more of the scan and passes the check itself;
+//! 3. a match still below the level does not enter the map (a residual alone does not keep it
+//!    out); where the prediction explains
 //!    the scan at least as well, the prediction is reported instead (a
 //!    [`Fallback::Refused`](qicp_core::Fallback::Refused)), so the next prediction does not
 //!    start from a match that went astray;
@@ -51,7 +53,8 @@ pub struct ValidationParams {
     /// MIT CSAIL log, 108 pairs against a level of about 220, with 0.80 of its points
     /// explained). Default 0.3.
     pub max_pair_drop: f64,
-    /// Checked scans in the running median. Default 25.
+    /// Checked scans in the running median, 5 to 10,000 (a [`Validator::new`] given another
+    /// value takes the nearest of these). Default 25.
     pub history: usize,
     /// Run the correlative search on suspect matches. Default true.
     pub search: bool,
@@ -108,6 +111,8 @@ impl Default for ValidationParams {
 
 /// The running median needs this many scans before it judges any.
 const MIN_HISTORY: usize = 5;
+/// The longest history `validate` allows.
+const MAX_HISTORY: usize = 10_000;
 
 impl ValidationParams {
     /// Checks every value; the error names the key.
@@ -131,10 +136,10 @@ impl ValidationParams {
                 format!("{} must be finite and ≥ 1", self.max_residual_ratio),
             ));
         }
-        if !(MIN_HISTORY..=10_000).contains(&self.history) {
+        if !(MIN_HISTORY..=MAX_HISTORY).contains(&self.history) {
             return Err(ConfigError::invalid(
                 "matcher.validation.history",
-                format!("{} must be in {MIN_HISTORY}..=10000", self.history),
+                format!("{} must be in {MIN_HISTORY}..={MAX_HISTORY}", self.history),
             ));
         }
         crate::icp::non_negative(
@@ -244,7 +249,10 @@ pub struct Level {
 impl Validator {
     /// A validator with no history.
     #[must_use]
-    pub fn new(params: ValidationParams) -> Self {
+    pub fn new(mut params: ValidationParams) -> Self {
+        // Built directly, the parameters are not validated: the history is kept within the
+        // range `validate` allows, so it stays bounded and long enough to set a level.
+        params.history = params.history.clamp(MIN_HISTORY, MAX_HISTORY);
         Self {
             params,
             recent: VecDeque::with_capacity(params.history),
@@ -383,6 +391,27 @@ mod tests {
             share,
             residual,
             pairs: 100.0,
+        }
+    }
+
+    #[test]
+    fn a_validator_built_with_no_history_keeps_a_bounded_one_that_sets_a_level() {
+        // Built directly, the parameters are not validated: a history of 0 once let the fits
+        // pile up without bound, and one below five never set a level.
+        for (history, kept) in [
+            (0, MIN_HISTORY),
+            (2, MIN_HISTORY),
+            (usize::MAX, MAX_HISTORY),
+        ] {
+            let mut v = Validator::new(ValidationParams {
+                history,
+                ..ValidationParams::default()
+            });
+            for _ in 0..MAX_HISTORY + 10 {
+                v.record(fit(0.9, 0.01));
+            }
+            assert_eq!(v.recent.len(), kept, "history {history}");
+            assert!(v.threshold().is_some(), "history {history}");
         }
     }
 

@@ -245,3 +245,23 @@ fn a_reanchoring_is_taken_once_look_ups_close_together_agree_on_it() {
     let found = reanchored(&mut first, &reference, &drifted);
     assert!(first.corroborated(&drifted, &found));
 }
+
+#[test]
+fn look_ups_built_with_an_age_of_zero_do_not_panic() {
+    // Built directly, the parameters are not validated; an age of 0 is taken as 1.
+    let mut revisit = Revisit::new(RevisitParams {
+        age_scans: 0,
+        every: 1,
+        ..RevisitParams::default()
+    });
+    assert_eq!(revisit.params().age_scans, 1);
+    let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
+    let reference = map(drift, 3, &mut revisit);
+    let truth = pose(4);
+    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
+    // Every scan but the newest is old: the drifted copy is old map too, and fits the match.
+    assert_eq!(
+        revisit.propose(&reference, scan.points(), &(drift * truth)),
+        None
+    );
+}

@@ -719,3 +719,40 @@ fn a_turn_odometry_never_made_is_not_followed_on_a_few_points_more() {
         );
     }
 }
+
+/// A scan too sparse to be matched at all (fewer valid beams than `min_correspondences`) once
+/// replaced a scan-to-scan reference, so that the next full scan found nothing to pair with
+/// and fell back to odometry too.
+#[test]
+fn a_scan_too_sparse_to_match_does_not_replace_the_scan_to_scan_reference() {
+    for kind in [MatcherKind::Idc, MatcherKind::Wsm] {
+        let mut pipeline = MatcherConfig::defaults(kind).build().expect("builds");
+        for k in 0..8 {
+            let mut r = record(k, truth(k));
+            if k == 5 {
+                // Four returns left of 181: the rest read nothing.
+                let ranges: Vec<f64> = r
+                    .scan
+                    .ranges()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &range)| if i % 45 == 0 { range } else { f64::NAN })
+                    .collect();
+                r.scan = Scan::new(r.scan.timestamp, r.scan.geometry, ranges).expect("valid");
+                assert!(r.scan.valid_count() < 12, "{}", r.scan.valid_count());
+            }
+            let e = pipeline.process(&r);
+            if k == 5 {
+                assert!(
+                    matches!(e.result.fallback, Some(Fallback::TooFewPoints { .. })),
+                    "{kind:?}: {e:?}"
+                );
+                assert!(!e.inserted, "{kind:?}");
+            } else if k > 0 {
+                assert_eq!(e.result.fallback, None, "{kind:?} scan {k}");
+                let (d, g) = error(&e.pose, k);
+                assert!(d < 0.05 && g < 0.5, "{kind:?} scan {k}: {d} m, {g}°");
+            }
+        }
+    }
+}
