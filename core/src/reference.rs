@@ -286,6 +286,8 @@ pub struct Reference<I> {
     looks: Vec<(u16, u16)>,
     /// Scratch of the carving's radius search.
     around: Vec<Neighbour>,
+    /// Times the points were given new ids ([`Reference::renumberings`]).
+    renumberings: u64,
     /// The noise of the laser whose scans enter, and of the scans matched against them.
     noise: LaserNoise,
 }
@@ -314,6 +316,7 @@ impl<I: SpatialIndex> Reference<I> {
             stale: 0,
             looks: Vec::new(),
             around: Vec::new(),
+            renumberings: 0,
             noise,
         }
     }
@@ -386,6 +389,15 @@ impl<I: SpatialIndex> Reference<I> {
         self.scans
     }
 
+    /// How many times its points were given new ids: by a [`clear`](Self::clear), or by a
+    /// rebuild that dropped points a full cell replaced or carving removed (the live points
+    /// keep their order). An id, or a length taken as a boundary between ids, held from
+    /// before one means nothing after it.
+    #[must_use]
+    pub fn renumberings(&self) -> u64 {
+        self.renumberings
+    }
+
     /// True when scans are merged into this reference (a map: [`Reference::insert_scan`]
     /// with `Some(merge)` since the last clear), false for a scan as reference. A map's older
     /// passes are off from the current estimate by the drift since they were seen, which one
@@ -427,6 +439,7 @@ impl<I: SpatialIndex> Reference<I> {
         self.live.clear();
         self.stale = 0;
         self.looks.clear();
+        self.renumberings += 1;
     }
 
     /// Inserts the points of `scan`, seen from `pose` (the laser's pose in the reference
@@ -647,6 +660,7 @@ impl<I: SpatialIndex> Reference<I> {
     fn rebuild(&mut self) -> Result<(), IndexError> {
         let points = self.index.points().to_vec();
         self.index.clear();
+        self.renumberings += 1;
         let mut id_of = vec![PointId::MAX; points.len()];
         let mut k = 0;
         for (old, p) in points.iter().enumerate() {

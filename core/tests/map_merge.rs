@@ -471,3 +471,34 @@ fn a_wall_copied_in_by_a_wrong_match_is_carved_by_the_scans_after_it() {
     assert_eq!(quad.live_points(), rebuilt.live_points(), "the same map");
     assert_eq!(kd.live_points(), rebuilt.live_points(), "the same map");
 }
+
+#[test]
+fn a_rebuild_that_drops_replaced_points_is_counted_as_a_renumbering() {
+    // Looks at one wall, each a little off the last, into cells capped at 16 points: full
+    // cells replace their stalest points, and the index drops them in rebuilds, which give
+    // the live points new ids. A look that rebuilt leaves no replaced point in the index and
+    // the index as long as the live map.
+    let merge = Merge {
+        max_cell_points: 16,
+        cell_size: 0.1,
+        full_cell: FullCell::EvictStalest,
+        surface_band: 0.005,
+        ..Merge::spacing(0.0)
+    };
+    let mut map = Reference::new(QuadTree::default());
+    let mut counted = 0;
+    for k in 0..60 {
+        let (scan, pose) = wall_scan(0.003 * (k % 7) as f64, 0.012 * (k % 5) as f64);
+        map.insert_scan(&scan, &pose, Some(merge)).expect("finite");
+        let now = map.renumberings();
+        assert!(now == counted || now == counted + 1, "look {k}: {counted} -> {now}");
+        if now > counted {
+            assert_eq!(map.stale_len(), 0, "look {k}");
+            assert_eq!(map.index().len(), map.len(), "look {k}");
+        }
+        counted = now;
+    }
+    assert!(counted > 0, "the looks never filled the map's cells");
+    map.clear();
+    assert_eq!(map.renumberings(), counted + 1);
+}

@@ -444,6 +444,8 @@ pub struct Pipeline<M, I> {
     validator: Validator,
     /// The look-ups in the old map that re-anchor a match on a revisit.
     revisit: Revisit,
+    /// The reference's [`renumberings`](Reference::renumberings) the look-ups know of.
+    renumberings: u64,
     search: CorrelativeSearch,
     /// Odometry's scale and drift, fitted to the accepted matches.
     calibration: OdometryCalibration,
@@ -476,6 +478,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             validator: Validator::new(ValidationParams::default()),
             search: CorrelativeSearch::new(CorrelativeParams::default()),
             revisit: Revisit::new(RevisitParams::default()),
+            renumberings: 0,
             calibration: OdometryCalibration::default(),
         }
         .with_motion_model(MotionModel::default())
@@ -703,6 +706,10 @@ where
         let laser = self.reference_frame * result.pose;
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
+        if boosted && self.reference.renumberings() != self.renumberings {
+            self.renumberings = self.reference.renumberings();
+            self.revisit.renumbered();
+        }
         if inserted && boosted {
             self.revisit.inserted(self.reference.index().len());
         }

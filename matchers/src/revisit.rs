@@ -200,9 +200,16 @@ impl Revisit {
         &self.params
     }
 
-    /// Notes that a scan entered the map, which now holds `len` points. A map that holds
-    /// fewer than before was rebuilt (a windowed map), its ids given anew: its age starts
+    /// Notes that the map's points were given new ids ([`Reference::renumberings`]): the
+    /// lengths held no longer divide old points from recent ones, and the map's age starts
     /// afresh.
+    pub fn renumbered(&mut self) {
+        self.sizes.clear();
+    }
+
+    /// Notes that a scan entered the map, which now holds `len` points. A map that holds
+    /// fewer than before was rebuilt, its ids given anew: its age starts afresh (as after
+    /// [`renumbered`](Self::renumbered), which tells a rebuild that did not shrink the map).
     pub fn inserted(&mut self, len: usize) {
         if self.sizes.back().is_some_and(|&last| len < last) {
             self.sizes.clear();

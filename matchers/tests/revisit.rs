@@ -265,3 +265,34 @@ fn look_ups_built_with_an_age_of_zero_do_not_panic() {
         None
     );
 }
+
+#[test]
+fn a_map_given_new_ids_is_not_looked_up_until_it_is_old_again() {
+    let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
+    let mut revisit = look_ups();
+    let mut reference = map(drift, 3, &mut revisit);
+    let truth = pose(4);
+    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
+    let drifted = drift * truth;
+    assert!(revisit.propose(&reference, scan.points(), &drifted).is_some());
+    // The map laid again, the drifted copy first (twice) and the old one after: it is longer
+    // than before, but the ids the look-ups took for old now hold the drifted copy alone.
+    let renumbered = reference.renumberings();
+    reference.clear();
+    let room = SyntheticWorld::room();
+    for k in (OLD..OLD + 3).chain(OLD..OLD + 3).chain(0..OLD) {
+        let laid = if k < OLD { pose(k) } else { drift * pose(k % OLD) };
+        let s = room.scan(&pose(k % OLD), 0.005, k as u64 + 1);
+        reference.insert_scan(&s, &laid, None).expect("finite");
+    }
+    assert!(reference.renumberings() > renumbered);
+    // Ages kept across the renumbering take the drifted copy for the old map, and would move
+    // the right match onto it.
+    let mut stale = revisit.clone();
+    stale.inserted(reference.index().len());
+    assert!(stale.propose(&reference, scan.points(), &truth).is_some());
+    // Told of it, the look-ups wait until the map is old again.
+    revisit.renumbered();
+    revisit.inserted(reference.index().len());
+    assert_eq!(revisit.propose(&reference, scan.points(), &truth), None);
+}
