@@ -491,7 +491,10 @@ fn a_rebuild_that_drops_replaced_points_is_counted_as_a_renumbering() {
         let (scan, pose) = wall_scan(0.003 * (k % 7) as f64, 0.012 * (k % 5) as f64);
         map.insert_scan(&scan, &pose, Some(merge)).expect("finite");
         let now = map.renumberings();
-        assert!(now == counted || now == counted + 1, "look {k}: {counted} -> {now}");
+        assert!(
+            now == counted || now == counted + 1,
+            "look {k}: {counted} -> {now}"
+        );
         if now > counted {
             assert_eq!(map.stale_len(), 0, "look {k}");
             assert_eq!(map.index().len(), map.len(), "look {k}");

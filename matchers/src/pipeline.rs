@@ -78,8 +78,10 @@ pub struct Relevance {
     /// most half as many again (it is rebuilt from the newest `window_scans` when it reaches
     /// 1.5 × that), so memory and per-scan time stay bounded on a drive of any length, at the
     /// price of the places left behind: a loop longer than the window is matched against
-    /// its own recent scans, not against its start. 0 keeps every relevant scan, as Alg. 1
-    /// reads. Default 0.
+    /// its own recent scans, not against its start. Each rebuild starts the map's age afresh
+    /// for re-anchoring's look-ups (`[matcher.revisit] age_scans`), so a window of fewer than
+    /// twice `age_scans` scans never looks up its old map after its first rebuild. 0 keeps
+    /// every relevant scan, as Alg. 1 reads. Default 0.
     pub window_scans: usize,
     /// Free-space carving ([`Merge::free_space_margin`], m): a map point that merged scans
     /// see through (both beams around its bearing return from beyond it by more than this)

@@ -274,14 +274,22 @@ fn a_map_given_new_ids_is_not_looked_up_until_it_is_old_again() {
     let truth = pose(4);
     let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
     let drifted = drift * truth;
-    assert!(revisit.propose(&reference, scan.points(), &drifted).is_some());
+    assert!(
+        revisit
+            .propose(&reference, scan.points(), &drifted)
+            .is_some()
+    );
     // The map laid again, the drifted copy first (twice) and the old one after: it is longer
     // than before, but the ids the look-ups took for old now hold the drifted copy alone.
     let renumbered = reference.renumberings();
     reference.clear();
     let room = SyntheticWorld::room();
     for k in (OLD..OLD + 3).chain(OLD..OLD + 3).chain(0..OLD) {
-        let laid = if k < OLD { pose(k) } else { drift * pose(k % OLD) };
+        let laid = if k < OLD {
+            pose(k)
+        } else {
+            drift * pose(k % OLD)
+        };
         let s = room.scan(&pose(k % OLD), 0.005, k as u64 + 1);
         reference.insert_scan(&s, &laid, None).expect("finite");
     }
