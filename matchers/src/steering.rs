@@ -45,6 +45,16 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("revisit.confirm_gap", Acts::Map),
 ];
 
+/// Steering parameters that act only while switches are on: each is left out of the sweep
+/// while one of its switches is false, as scaling it would change nothing (and a variant that
+/// repeats the default would pull the sweep's median ratio towards 1).
+const SWITCHED: &[(&str, &[&str])] = &[
+    ("validation.", &["validation.enabled"]),
+    ("correlative.", &["validation.enabled", "validation.search"]),
+    ("revisit.", &["validation.enabled", "revisit.enabled"]),
+    ("motion.sigma_", &["motion.enabled"]),
+];
+
 /// Steering parameters that act only through another one: each is left out of the sweep
 /// while the parameter it serves is 0 (off), as scaling it would change nothing.
 const SERVES: &[(&str, &str)] = &[
@@ -89,6 +99,15 @@ impl MatcherConfig {
                         || lookup(&value, &format!("matcher.{served}")).is_some_and(|v| v != 0.0)
                 })
             })
+            .filter(|k| {
+                SWITCHED.iter().all(|(prefix, switches)| {
+                    !k.strip_prefix("matcher.")
+                        .is_some_and(|k| k.starts_with(prefix))
+                        || switches
+                            .iter()
+                            .all(|s| switch(&value, &format!("matcher.{s}")) != Some(false))
+                })
+            })
             .collect()
     }
 
@@ -128,6 +147,16 @@ impl MatcherConfig {
             &|_| false,
         )
     }
+}
+
+/// The boolean at a dotted key (`"matcher.revisit.enabled"`) of an effective config's table.
+fn switch(table: &toml::Table, key: &str) -> Option<bool> {
+    let mut parts = key.strip_prefix("matcher.")?.split('.');
+    let mut at = table.get(parts.next()?)?;
+    for part in parts {
+        at = at.get(part)?;
+    }
+    at.as_bool()
 }
 
 /// The number at a dotted key (`"matcher.wsm.sigma_slide"`) of an effective config's table.

@@ -256,6 +256,57 @@ fn steering_parameters_scale_one_at_a_time() {
     assert!(err.to_string().contains("matcher.icp.nope"));
 }
 
+/// A check switched off leaves its parameters inert: sweeping them would rerun the default and
+/// pull the median ratio towards 1 (a review of the sweep found `revisit.*` variants run with
+/// re-anchoring off).
+#[test]
+fn a_switched_off_check_leaves_its_parameters_out_of_the_sweep() {
+    let swept = |c: &MatcherConfig, prefix: &str| {
+        c.steering_parameters()
+            .iter()
+            .filter(|k| k.starts_with(prefix))
+            .count()
+    };
+    let on = MatcherConfig::defaults(MatcherKind::QWsm);
+    for prefix in [
+        "matcher.validation.",
+        "matcher.correlative.",
+        "matcher.revisit.",
+        "matcher.motion.sigma_",
+    ] {
+        assert!(swept(&on, prefix) > 0, "{prefix}");
+    }
+    let mut no_revisit = on.clone();
+    no_revisit.revisit.enabled = false;
+    assert_eq!(swept(&no_revisit, "matcher.revisit."), 0);
+    assert_eq!(
+        swept(&no_revisit, "matcher.validation."),
+        swept(&on, "matcher.validation.")
+    );
+    let mut no_search = on.clone();
+    no_search.validation.search = false;
+    assert_eq!(swept(&no_search, "matcher.correlative."), 0);
+    assert!(swept(&no_search, "matcher.validation.") > 0);
+    let mut unchecked = on.clone();
+    unchecked.validation.enabled = false;
+    for prefix in [
+        "matcher.validation.",
+        "matcher.correlative.",
+        "matcher.revisit.",
+    ] {
+        assert_eq!(swept(&unchecked, prefix), 0, "{prefix}");
+    }
+    let mut no_prior = on.clone();
+    no_prior.motion.enabled = false;
+    assert_eq!(swept(&no_prior, "matcher.motion.sigma_"), 0);
+    // The rest of the sweep stays as it was.
+    assert!(
+        unchecked
+            .steering_parameters()
+            .contains(&"matcher.icp.max_dist_start".to_string())
+    );
+}
+
 /// The axes compose to the presets: `kind = "q-wsm"` and `algorithm = "wsm"` (with the
 /// default reference and index) are one config, and so are the other five.
 #[test]
