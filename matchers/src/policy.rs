@@ -186,7 +186,8 @@ impl ReferencePolicy for ScanPolicy {
         // left what the old one saw. Not one too sparse to be matched at all (fewer valid
         // beams than the matcher's minimum): the next scan would find nothing in it either.
         let too_sparse = matches!(m.result.fallback, Some(Fallback::TooFewPoints { .. }));
-        if !(enough_points(m.scan) && !too_sparse && (relevant || !matched)) {
+        let replaces = enough_points(m.scan) && !too_sparse && (relevant || !matched);
+        if !replaces {
             return false;
         }
         reference.clear();
