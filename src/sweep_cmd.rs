@@ -49,7 +49,9 @@ pub struct SweepArgs {
     #[arg(long, value_enum, default_value_t = crate::match_cmd::LogOrder::File)]
     pub order: crate::match_cmd::LogOrder,
     /// Also write each run's trajectory to DIR/<run>.tum (e.g. default.tum, scans-2.tum), to
-    /// see where a variant goes wrong (`qicp eval relations DIR/scans-2.tum RELATIONS`).
+    /// see where a variant goes wrong (`qicp eval relations DIR/scans-2.tum RELATIONS --max-dt
+    /// 1e-6` scores it as the sweep does, on the records it matched, where the relations' times
+    /// are the log's own).
     #[arg(long, value_name = "DIR")]
     pub trajectories: Option<PathBuf>,
 }

@@ -255,6 +255,46 @@ mod tests {
         assert!(near.trans_mean > 0.01, "{near:?}");
     }
 
+    /// With only the first records scanned, a relation about a later record stays off the
+    /// scanned record beside it (within the 0.1 s window), and is missing from the runs.
+    #[test]
+    fn a_relation_about_a_record_past_those_scanned_is_not_snapped_onto_one() {
+        let records: Vec<Stamped> = (0..20)
+            .map(|i| (0.05 * i as f64, Pose2::new(0.02 * i as f64, 0.0, 0.0)))
+            .collect();
+        let relations = [
+            Relation {
+                t1: 0.0,
+                t2: 0.45,
+                delta: Pose2::new(0.18, 0.0, 0.0),
+            },
+            Relation {
+                t1: 0.0,
+                t2: 0.5,
+                delta: Pose2::new(0.2, 0.0, 0.0),
+            },
+        ];
+        let (mut scanned, mut all) = (
+            RelationProbe::new(&relations, 0.1).unwrap(),
+            RelationProbe::new(&relations, 0.1).unwrap(),
+        );
+        for (k, (t, p)) in records.iter().enumerate() {
+            if k < 10 {
+                scanned.push(*t, *p).unwrap();
+            }
+            all.push(*t, *p).unwrap();
+        }
+        let snapped = scanned.snap_within(&relations, &all);
+        // Record 10 (0.5 s) was not scanned; record 9 (0.45 s) lies within 0.1 s of it.
+        assert_eq!(snapped[0].t2, 0.45);
+        assert_eq!(snapped[1].t2, 0.5);
+        let run: Vec<Stamped> = records[..10].to_vec();
+        let report = evaluate_relations(&run, &snapped, SNAPPED_MAX_DT).unwrap();
+        assert_eq!((report.n, report.missing), (1, 1));
+        // Snapping against itself would have taken it onto record 9.
+        assert_eq!(scanned.snap(&relations)[1].t2, 0.45);
+    }
+
     /// A drive along a gently curving path, one pose every 0.1 s.
     fn drive(n: usize) -> Vec<Stamped> {
         let mut p = Pose2::IDENTITY;

@@ -168,15 +168,28 @@ impl RelationProbe {
     /// fed the log's records, the record each relation is about. A run that matched only some
     /// records (every second one, say) is then scored on the records it has, within a window
     /// narrower than their spacing ([`SNAPPED_MAX_DT`]), never with a neighbour's pose as if it
-    /// were taken at the relation's time. A time with no pose is kept as it is.
+    /// were taken at the relation's time. A time with no pose is kept as it is. Records that
+    /// share one timestamp cannot be told apart: of those the probe keeps one, by its tie
+    /// rule.
     #[must_use]
     pub fn snap(&self, relations: &[Relation]) -> Vec<Relation> {
+        self.snap_within(relations, self)
+    }
+
+    /// [`snap`](Self::snap) for a probe fed only some of the log's records (the first N):
+    /// a time moves only where `all`, the probe of the same relations fed every record, picked
+    /// the same record. A relation about a record this probe was not fed is left at its time,
+    /// not moved onto a fed record beside it.
+    #[must_use]
+    pub fn snap_within(&self, relations: &[Relation], all: &RelationProbe) -> Vec<Relation> {
         let at = |t: f64| {
-            self.times
-                .binary_search_by(|w| w.total_cmp(&t))
-                .ok()
-                .and_then(|i| self.best[i])
-                .map_or(t, |(s, _)| s)
+            let i = self.times.binary_search_by(|w| w.total_cmp(&t)).ok();
+            let picked = i.and_then(|i| self.best[i]);
+            let overall = i.and_then(|i| all.best.get(i).copied().flatten());
+            match (picked, overall) {
+                (Some((s, _)), Some((o, _))) if s == o => s,
+                _ => t,
+            }
         };
         relations
             .iter()

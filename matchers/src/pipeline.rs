@@ -67,7 +67,10 @@ pub struct Relevance {
     /// Alg. 1 reads), so its density stops growing with the visits. A straight wall sampled
     /// at WSM's 1 cm spacing puts about ten points into each cell it crosses (IDC's 2 cm,
     /// five). Default 0 (off): at 20 the Intel sweeps of q-wsm scored no better over both
-    /// record orders, and its default run broke in one of them (see the README).
+    /// record orders, and its default run broke in one of them (see the README). The points
+    /// full cells replace leave the index in rebuilds, each of which restarts the map's age
+    /// for re-anchoring's look-ups (`[matcher.revisit] age_scans`): with a cap, a revisit
+    /// that fills cells is looked up less often.
     pub max_cell_points: u32,
     /// What a full cell does with a new point: `"evict_stalest"` (default) replaces the
     /// cell's point that scans have confirmed least recently; `"skip"` keeps its first points
@@ -399,17 +402,25 @@ struct OdometryRun {
 
 impl OdometryRun {
     /// Extends `run` by a record whose reading repeats the previous one (`!fresh`), or starts a
-    /// new run at it (`laser`). A re-anchored record starts a run of its own: a restart after
-    /// a stall must not go back to a pose from before the correction.
+    /// new run at it (`laser`). A record re-anchored by `correction` (the corrected laser pose
+    /// times the inverse of the match's, in the world) moves the run's start with it: a
+    /// restart after the stall then takes the reading's motion from where the stall began, in
+    /// the corrected frame, neither losing the correction nor counting the stall's motion
+    /// twice.
     fn follow(
         run: &mut Option<Self>,
         fresh: bool,
-        check: &Check,
         contradicted: bool,
         laser: Pose2,
+        correction: Option<Pose2>,
     ) {
         match run {
-            Some(run) if !fresh && !check.reanchored => run.contradicted |= contradicted,
+            Some(run) if !fresh => {
+                if let Some(c) = correction {
+                    run.start = c * run.start;
+                }
+                run.contradicted |= contradicted;
+            }
             _ => {
                 *run = Some(Self {
                     start: laser,
@@ -676,6 +687,7 @@ where
         let boosted = self.policy.is_map();
         // On a revisit the match may be re-anchored to the old map: a correction of drift,
         // which odometry's veto must not take back.
+        let matched = result.pose;
         check.reanchored = boosted
             && self.validator.params.enabled
             && result.fallback.is_none()
@@ -721,7 +733,11 @@ where
         {
             self.calibration.learn(&raw, &before.between(&laser));
         }
-        OdometryRun::follow(&mut self.run, fresh, &check, contradicted, laser);
+        // In the world: the corrected laser pose times the inverse of the match's.
+        let correction = check
+            .reanchored
+            .then(|| laser * (self.reference_frame * matched).inverse());
+        OdometryRun::follow(&mut self.run, fresh, contradicted, laser, correction);
         self.last = Some((record.odometry, laser));
         Estimate {
             pose: laser * offset.inverse(),
@@ -759,19 +775,28 @@ mod tests {
     }
 
     #[test]
-    fn a_reanchoring_during_a_stall_starts_a_new_odometry_run() {
-        let (before, corrected) = (Pose2::new(1.0, 0.0, 0.0), Pose2::new(1.4, 0.2, 0.05));
+    fn a_reanchoring_during_a_stall_moves_the_stall_start_with_it() {
+        let start = Pose2::new(1.0, 0.0, 0.0);
         let mut run = None;
-        OdometryRun::follow(&mut run, true, &Check::UNCHECKED, false, before);
+        OdometryRun::follow(&mut run, true, false, start, None);
         // The reading repeats and a match contradicts it: the stall's run holds on.
-        OdometryRun::follow(&mut run, false, &Check::UNCHECKED, true, before);
-        assert!(run.is_some_and(|r| r.contradicted && r.start == before));
-        // A re-anchoring with the reading still repeated starts a run at the corrected pose.
-        let reanchored = Check {
-            reanchored: true,
-            ..Check::UNCHECKED
-        };
-        OdometryRun::follow(&mut run, false, &reanchored, false, corrected);
-        assert!(run.is_some_and(|r| !r.contradicted && r.start == corrected));
+        OdometryRun::follow(&mut run, false, true, Pose2::new(1.3, 0.0, 0.0), None);
+        assert!(run.is_some_and(|r| r.contradicted && r.start == start));
+        // A re-anchoring with the reading still repeated: the match at (1.6, 0) is moved to
+        // (1.9, 0.2) turned by 0.05 rad, and the stall's start moves by the same correction.
+        let (matched, corrected) = (Pose2::new(1.6, 0.0, 0.0), Pose2::new(1.9, 0.2, 0.05));
+        let correction = corrected * matched.inverse();
+        OdometryRun::follow(&mut run, false, false, corrected, Some(correction));
+        let moved = run.map(|r| r.start).expect("a run");
+        // The stall's start keeps its place relative to the match: 0.6 m behind it.
+        let behind = moved.between(&corrected);
+        assert!(
+            (behind.x - 0.6).abs() < 1e-12 && behind.y.abs() < 1e-12,
+            "{behind:?}"
+        );
+        assert!(run.is_some_and(|r| r.contradicted));
+        // A fresh reading starts a new run.
+        OdometryRun::follow(&mut run, true, false, Pose2::new(2.5, 0.2, 0.05), None);
+        assert!(run.is_some_and(|r| !r.contradicted && r.start.x == 2.5));
     }
 }

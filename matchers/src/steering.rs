@@ -50,6 +50,15 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
 /// repeats the default would pull the sweep's median ratio towards 1).
 const SWITCHED: &[(&str, &[&str])] = &[
     ("validation.", &["validation.enabled"]),
+    // A residual or a pair count below the level only sends a match to the search.
+    ("validation.max_residual_ratio", &["validation.search"]),
+    ("validation.max_pair_drop", &["validation.search"]),
+    // Odometry's veto needs the motion prior; its weighing, the fall-back.
+    ("validation.max_odometry_chi2", &["motion.enabled"]),
+    (
+        "validation.point_evidence",
+        &["motion.enabled", "validation.veto_falls_back"],
+    ),
     ("correlative.", &["validation.enabled", "validation.search"]),
     ("revisit.", &["validation.enabled", "revisit.enabled"]),
     ("motion.sigma_", &["motion.enabled"]),
@@ -60,6 +69,7 @@ const SWITCHED: &[(&str, &[&str])] = &[
 const SERVES: &[(&str, &str)] = &[
     ("relevance.novelty_distance", "relevance.min_novelty"),
     ("relevance.cell_size", "relevance.max_cell_points"),
+    ("validation.point_evidence", "validation.max_odometry_chi2"),
 ];
 
 impl MatcherConfig {

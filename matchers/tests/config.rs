@@ -296,9 +296,29 @@ fn a_switched_off_check_leaves_its_parameters_out_of_the_sweep() {
     ] {
         assert_eq!(swept(&unchecked, prefix), 0, "{prefix}");
     }
+    assert!(
+        !no_search
+            .steering_parameters()
+            .iter()
+            .any(|k| k.ends_with("max_pair_drop") || k.ends_with("max_residual_ratio"))
+    );
     let mut no_prior = on.clone();
     no_prior.motion.enabled = false;
     assert_eq!(swept(&no_prior, "matcher.motion.sigma_"), 0);
+    for key in ["max_odometry_chi2", "point_evidence"] {
+        assert!(
+            swept(&on, &format!("matcher.validation.{key}")) > 0,
+            "{key}"
+        );
+        assert_eq!(
+            swept(&no_prior, &format!("matcher.validation.{key}")),
+            0,
+            "{key}"
+        );
+    }
+    let mut no_veto = on.clone();
+    no_veto.validation.max_odometry_chi2 = 0.0;
+    assert_eq!(swept(&no_veto, "matcher.validation.point_evidence"), 0);
     // The rest of the sweep stays as it was.
     assert!(
         unchecked

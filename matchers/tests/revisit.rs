@@ -299,8 +299,28 @@ fn a_map_given_new_ids_is_not_looked_up_until_it_is_old_again() {
     let mut stale = revisit.clone();
     stale.inserted(reference.index().len());
     assert!(stale.propose(&reference, scan.points(), &truth).is_some());
-    // Told of it, the look-ups wait until the map is old again.
+    // Told of it, the look-ups wait until the map is old again…
     revisit.renumbered();
     revisit.inserted(reference.index().len());
     assert_eq!(revisit.propose(&reference, scan.points(), &truth), None);
+    // … and look up again once the map is old enough: laid afresh as at the start (the old
+    // copy, then the drifted one), the drifted match is proposed back onto the old copy.
+    reference.clear();
+    revisit.renumbered();
+    for k in 0..OLD + 3 {
+        let laid = if k < OLD {
+            pose(k)
+        } else {
+            drift * pose(k % OLD)
+        };
+        let s = room.scan(&pose(k % OLD), 0.005, k as u64 + 1);
+        reference.insert_scan(&s, &laid, None).expect("finite");
+        revisit.inserted(reference.index().len());
+    }
+    assert!(
+        revisit
+            .propose(&reference, scan.points(), &drifted)
+            .is_some(),
+        "look-ups resume"
+    );
 }

@@ -730,7 +730,7 @@ fn a_scan_too_sparse_to_match_does_not_replace_the_scan_to_scan_reference() {
         for k in 0..8 {
             let mut r = record(k, truth(k));
             if k == 5 {
-                // Four returns left of 181: the rest read nothing.
+                // Five returns left of 181: the rest read nothing.
                 let ranges: Vec<f64> = r
                     .scan
                     .ranges()

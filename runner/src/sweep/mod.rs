@@ -468,7 +468,17 @@ impl SweepInput {
             probe.push(t, odometry).map_err(anyhow::Error::from)
         })?;
         let (found, _) = relation_errors(&probe.trajectory(), &relations, MAX_DT)?;
-        let relations = probe.snap(&relations);
+        let relations = if scans.is_some_and(|n| n.get() <= count) {
+            // A relation about a record past the first `scans` must not be taken onto a
+            // record beside it that the runs use: the records past them are looked at too.
+            let mut all = RelationProbe::new(&relations, MAX_DT)?;
+            count_records(log, &options, None, |t, odometry| {
+                all.push(t, odometry).map_err(anyhow::Error::from)
+            })?;
+            probe.snap_within(&relations, &all)
+        } else {
+            probe.snap(&relations)
+        };
         if found.is_empty() {
             bail!(
                 "none of the {} relations of {relations_name} falls within the {count} scans \

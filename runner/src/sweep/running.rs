@@ -116,7 +116,9 @@ impl Job {
     }
 
     /// Matches `records` (in time order, perturbed as the job says, one at a time) and scores
-    /// the trajectory with `relations`. Memory holds the matcher's map and the poses at the
+    /// the trajectory with `relations`, whose times must be the records' own (as
+    /// [`SweepInput`] holds them; `RelationProbe::snap` makes them so): a relation is scored
+    /// only within [`SNAPPED_MAX_DT`] of them. Memory holds the matcher's map and the poses at the
     /// relations' times, not the records or the trajectory.
     pub fn run_on(
         &self,
@@ -175,8 +177,9 @@ impl Job {
 }
 
 impl RunFigures {
-    /// Scores `trajectory` (the poses at the relations' times, or more) with `relations`:
-    /// sets the error figures and the relation counts.
+    /// Scores `trajectory` (the poses at the relations' times, or more) with `relations`,
+    /// whose times must be the records' own (see [`Job::run_on`]): sets the error figures and
+    /// the relation counts.
     pub fn score(&mut self, trajectory: &[Stamped], relations: &[Relation]) -> Result<()> {
         let report = evaluate_relations(trajectory, relations, SNAPPED_MAX_DT)?;
         let (errors, _) = relation_errors(trajectory, relations, SNAPPED_MAX_DT)?;
