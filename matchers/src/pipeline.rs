@@ -687,7 +687,8 @@ where
         let boosted = self.policy.is_map();
         // On a revisit the match may be re-anchored to the old map: a correction of drift,
         // which odometry's veto must not take back.
-        let matched = result.pose;
+        // The match's laser pose in the world, before any re-anchoring.
+        let matched = self.reference_frame * result.pose;
         check.reanchored = boosted
             && self.validator.params.enabled
             && result.fallback.is_none()
@@ -734,9 +735,7 @@ where
             self.calibration.learn(&raw, &before.between(&laser));
         }
         // In the world: the corrected laser pose times the inverse of the match's.
-        let correction = check
-            .reanchored
-            .then(|| laser * (self.reference_frame * matched).inverse());
+        let correction = check.reanchored.then(|| laser * matched.inverse());
         OdometryRun::follow(&mut self.run, fresh, contradicted, laser, correction);
         self.last = Some((record.odometry, laser));
         Estimate {
