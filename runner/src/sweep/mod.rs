@@ -468,17 +468,6 @@ impl SweepInput {
             probe.push(t, odometry).map_err(anyhow::Error::from)
         })?;
         let (found, _) = relation_errors(&probe.trajectory(), &relations, MAX_DT)?;
-        let relations = if scans.is_some_and(|n| n.get() <= count) {
-            // A relation about a record past the first `scans` must not be taken onto a
-            // record beside it that the runs use: the records past them are looked at too.
-            let mut all = RelationProbe::new(&relations, MAX_DT)?;
-            count_records(log, &options, None, |t, odometry| {
-                all.push(t, odometry).map_err(anyhow::Error::from)
-            })?;
-            probe.snap_within(&relations, &all)
-        } else {
-            probe.snap(&relations)
-        };
         if found.is_empty() {
             bail!(
                 "none of the {} relations of {relations_name} falls within the {count} scans \
@@ -488,6 +477,20 @@ impl SweepInput {
                 span.1
             );
         }
+        let relations = if scans.is_some_and(|n| n.get() <= count) {
+            // A relation about a record past the first `scans` must not be taken onto a
+            // record beside it that the runs use: the records past them are looked at too.
+            let mut all = RelationProbe::new(&relations, MAX_DT)?;
+            let reader = LogReader::open(log, &options)
+                .with_context(|| format!("reading {}", log.display()))?;
+            // Quietly, and up to the first record it cannot read: the runs never read that far.
+            for record in reader.map_while(std::result::Result::ok) {
+                all.push(record.timestamp(), record.odometry)?;
+            }
+            probe.snap_within(&relations, &all)
+        } else {
+            probe.snap(&relations)
+        };
         Ok(Self::counted(log, options, count, relations))
     }
 
