@@ -19,9 +19,22 @@ fn pose(k: usize) -> Pose2 {
 /// laid `drift` off (what a robot lays that comes back with that much drift), the look-ups
 /// told of each insertion.
 fn map(drift: Pose2, recent: usize, revisit: &mut Revisit) -> Reference<QuadTree> {
-    let room = SyntheticWorld::room();
     let mut reference = Reference::new(QuadTree::default());
-    for k in 0..OLD + recent {
+    lay(&mut reference, drift, 0..OLD + recent, Some(revisit));
+    reference
+}
+
+/// Lays scans `ks` into `reference` in that order: scan k < [`OLD`] at its true pose (the old
+/// map), scan k ≥ `OLD` as a view of scan k mod `OLD` laid `drift` off; the look-ups, if
+/// given, told of each insertion.
+fn lay(
+    reference: &mut Reference<QuadTree>,
+    drift: Pose2,
+    ks: impl IntoIterator<Item = usize>,
+    mut revisit: Option<&mut Revisit>,
+) {
+    let room = SyntheticWorld::room();
+    for k in ks {
         let scan = room.scan(&pose(k % OLD), 0.005, k as u64 + 1);
         let laid = if k < OLD {
             pose(k)
@@ -29,9 +42,10 @@ fn map(drift: Pose2, recent: usize, revisit: &mut Revisit) -> Reference<QuadTree
             drift * pose(k % OLD)
         };
         reference.insert_scan(&scan, &laid, None).expect("finite");
-        revisit.inserted(reference.index().len());
+        if let Some(r) = revisit.as_deref_mut() {
+            r.inserted(reference.index().len());
+        }
     }
-    reference
 }
 
 /// Scans of the old map.
@@ -283,16 +297,8 @@ fn a_map_given_new_ids_is_not_looked_up_until_it_is_old_again() {
     // than before, but the ids the look-ups took for old now hold the drifted copy alone.
     let renumbered = reference.renumberings();
     reference.clear();
-    let room = SyntheticWorld::room();
-    for k in (OLD..OLD + 3).chain(OLD..OLD + 3).chain(0..OLD) {
-        let laid = if k < OLD {
-            pose(k)
-        } else {
-            drift * pose(k % OLD)
-        };
-        let s = room.scan(&pose(k % OLD), 0.005, k as u64 + 1);
-        reference.insert_scan(&s, &laid, None).expect("finite");
-    }
+    let drifted_twice_then_old = (OLD..OLD + 3).chain(OLD..OLD + 3).chain(0..OLD);
+    lay(&mut reference, drift, drifted_twice_then_old, None);
     assert!(reference.renumberings() > renumbered);
     // Ages kept across the renumbering take the drifted copy for the old map, and would move
     // the right match onto it.
@@ -307,16 +313,7 @@ fn a_map_given_new_ids_is_not_looked_up_until_it_is_old_again() {
     // copy, then the drifted one), the drifted match is proposed back onto the old copy.
     reference.clear();
     revisit.renumbered();
-    for k in 0..OLD + 3 {
-        let laid = if k < OLD {
-            pose(k)
-        } else {
-            drift * pose(k % OLD)
-        };
-        let s = room.scan(&pose(k % OLD), 0.005, k as u64 + 1);
-        reference.insert_scan(&s, &laid, None).expect("finite");
-        revisit.inserted(reference.index().len());
-    }
+    lay(&mut reference, drift, 0..OLD + 3, Some(&mut revisit));
     assert!(
         revisit
             .propose(&reference, scan.points(), &drifted)
