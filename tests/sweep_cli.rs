@@ -102,8 +102,11 @@ fn sweep_reports_the_default_and_each_variant_with_consistent_ratios() {
         for key in FIGURES.iter().chain(&["name", "ratio"]) {
             assert!(v.get(key).is_some(), "variant lacks {key}: {v}");
         }
+        // Against the default's error on the same relations where the variant scored only
+        // some (scans/2), against its whole mean otherwise.
+        let against = v.get("default_trans_mean").map_or(base, f);
         let ratio = f(&v["ratio"]);
-        assert!((ratio - f(&v["trans_mean"]) / base).abs() < 1e-12, "{v}");
+        assert!((ratio - f(&v["trans_mean"]) / against).abs() < 1e-12, "{v}");
         ratios.push(ratio);
         let name = v["name"].as_str().unwrap_or_default();
         assert!(
@@ -129,6 +132,11 @@ fn sweep_reports_the_default_and_each_variant_with_consistent_ratios() {
         2 * count(halved, "relations") < count(default, "relations"),
         "{halved}"
     );
+    // Its ratio is taken against the default on those same relations; the other variants,
+    // which score all of them, have no such figure.
+    let same = f(&halved["default_trans_mean"]);
+    assert!(same > 0.0 && same != base, "{halved}");
+    assert!(variants[1].get("default_trans_mean").is_none(), "{}", variants[1]);
     assert_eq!(
         count(&variants[1], "relations"),
         count(default, "relations")

@@ -214,7 +214,10 @@ def sweep_run(
     scans: Optional[int] = None,
     lenient: bool = False,
 ) -> dict:
-    """One run of ``qicp sweep``: its figures (the keys of a variant in ``--json``)."""
+    """One run of ``qicp sweep``: its figures (the keys of a variant in ``--json``) and
+    ``relation_errors``, each relation's translational error (``None`` where the run has no
+    pose at its times), with which ``sweep_report`` compares a variant that scored fewer
+    relations with the default on the same ones."""
 
 def sweep_relations(
     log: _StrPath,

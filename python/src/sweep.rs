@@ -69,6 +69,9 @@ fn figures_dict<'py>(
             }
         }
     }
+    // Each relation's error (None where the run has none): `sweep_report` compares a variant
+    // that scored fewer relations with the default on the same ones.
+    d.set_item("relation_errors", figures.relation_errors.clone())?;
     Ok(d)
 }
 
@@ -243,6 +246,11 @@ pub(crate) fn sweep_report(
             relations: get("relations")?.extract()?,
             relations_missing: get("relations_missing")?.extract()?,
             relations_over_0_5_m: get("relations_over_0_5_m")?.extract()?,
+            // Optional: figures from before it was passed on compare with the whole default.
+            relation_errors: match d.get_item("relation_errors")? {
+                Some(v) => v.extract()?,
+                None => Vec::new(),
+            },
         }))
     };
     let mut runs = results.iter();

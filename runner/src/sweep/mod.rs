@@ -80,8 +80,16 @@ pub struct VariantReport {
     /// Its figures (absent when it could not run).
     #[serde(flatten)]
     pub figures: Option<RunFigures>,
-    /// Its `trans_mean` over the default's.
+    /// Its `trans_mean` over the default's: over [`default_trans_mean`] where that is given.
+    ///
+    /// [`default_trans_mean`]: Self::default_trans_mean
     pub ratio: Option<f64>,
+    /// The default's mean translational error (m) on the relations this variant scored,
+    /// when it scored only some of the default's (`scans/2` scores those between two of the
+    /// records it keeps): its ratio and its bound are taken against this, not against the
+    /// default's whole `trans_mean`, so that both runs are judged on the same relations.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub default_trans_mean: Option<f64>,
     /// Why it could not run (an invalid scaled configuration, say).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -151,20 +159,24 @@ pub const BOUND_FACTOR: f64 = 2.0;
 pub const BOUND_FLOOR_M: f64 = 0.05;
 
 /// How many of `variants` exceed the bound around `default_trans_mean` (see
-/// [`SweepReport::variants_over_bound`]), and the geometric mean of their mean errors (of
-/// those that ran with a positive, finite error).
+/// [`SweepReport::variants_over_bound`]; around a variant's own
+/// [`VariantReport::default_trans_mean`] where it has one), and the geometric mean of their
+/// mean errors (of those that ran with a positive, finite error).
 #[must_use]
 pub fn robustness_figures(
     default_trans_mean: f64,
     variants: &[VariantReport],
 ) -> (usize, Option<f64>) {
-    let bound = (BOUND_FACTOR * default_trans_mean).max(BOUND_FLOOR_M);
-    let errors: Vec<f64> = variants
+    let bound = |v: &VariantReport| {
+        (BOUND_FACTOR * v.default_trans_mean.unwrap_or(default_trans_mean)).max(BOUND_FLOOR_M)
+    };
+    let runs: Vec<(f64, f64)> = variants
         .iter()
-        .filter_map(|v| v.figures.as_ref().map(|f| f.trans_mean))
+        .filter_map(|v| v.figures.as_ref().map(|f| (f.trans_mean, bound(v))))
         .collect();
     // An error that is not a number counts as over: it is no evidence of robustness.
-    let over = errors.iter().filter(|&&e| e > bound || e.is_nan()).count();
+    let over = runs.iter().filter(|&&(e, b)| e > b || e.is_nan()).count();
+    let errors: Vec<f64> = runs.iter().map(|r| r.0).collect();
     let logs: Vec<f64> = errors
         .iter()
         .filter(|e| e.is_finite() && **e > 0.0)
@@ -368,6 +380,15 @@ pub fn table(report: &SweepReport) -> String {
         match (&v.figures, &v.error) {
             (Some(f), _) => {
                 let _ = writeln!(out, "{}", line(&v.name, f, v.ratio));
+                if let Some(d) = v.default_trans_mean {
+                    let _ = writeln!(
+                        out,
+                        "{:width$}  (ratio and bound against the default's {} m on these {} relations)",
+                        "",
+                        fmt_f(d, 4),
+                        f.relations
+                    );
+                }
             }
             (None, e) => {
                 let _ = writeln!(
@@ -743,7 +764,9 @@ pub fn report(
     }
 }
 
-/// The ratio of a variant's figures to the default's, as reports give it.
+/// The ratio of a variant's figures to the default's, as reports give it: to the default's
+/// on the same relations where the variant scored only some of them
+/// ([`VariantReport::default_trans_mean`]).
 #[must_use]
 pub fn variant_report(
     name: &str,
@@ -754,9 +777,15 @@ pub fn variant_report(
         Ok(f) => (Some(f), None),
         Err(e) => (None, Some(e)),
     };
+    let same_relations = figures
+        .as_ref()
+        .and_then(|f| default.mean_on_relations_of(f));
     VariantReport {
         name: name.to_string(),
-        ratio: figures.as_ref().map(|f| f.trans_mean / default.trans_mean),
+        ratio: figures
+            .as_ref()
+            .map(|f| f.trans_mean / same_relations.unwrap_or(default.trans_mean)),
+        default_trans_mean: same_relations,
         figures,
         error,
     }

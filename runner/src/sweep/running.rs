@@ -25,6 +25,12 @@ pub struct RunFigures {
     pub relations_missing: usize,
     /// Relations with a translational error above [`FAILURE_M`].
     pub relations_over_0_5_m: usize,
+    /// Each relation's translational error (m), in the relations' order; `None` where the
+    /// run has no pose at one of its times. Not in the JSON: it lets a variant that scored
+    /// fewer relations than the default (`scans/2`) be compared with the default on the
+    /// relations both scored ([`RunFigures::mean_on_relations_of`]). Empty when unknown.
+    #[serde(skip)]
+    pub relation_errors: Vec<Option<f64>>,
 }
 
 /// One run of a sweep: the default, or one variant.
@@ -170,6 +176,7 @@ impl Job {
             relations: 0,
             relations_missing: 0,
             relations_over_0_5_m: 0,
+            relation_errors: Vec::new(),
         };
         figures.score(&probe.trajectory(), relations)?;
         Ok(figures)
@@ -193,7 +200,40 @@ impl RunFigures {
             .map(RelationError::trans)
             .filter(|&e| e > FAILURE_M)
             .count();
+        // `relation_errors` gives the scored relations in order, skipping the missing ones.
+        let mut scored = errors.iter().peekable();
+        self.relation_errors = relations
+            .iter()
+            .map(|r| {
+                scored
+                    .next_if(|e| e.t1 == r.t1 && e.t2 == r.t2)
+                    .map(RelationError::trans)
+            })
+            .collect();
         Ok(())
+    }
+
+    /// This run's mean translational error over the relations `other` scored, when `other`
+    /// scored only some of those this run did (`scans/2` keeps the relations between two
+    /// even records); `None` when both scored the same relations, or when either run's
+    /// per-relation errors are unknown (figures from outside, or another relations file).
+    #[must_use]
+    pub fn mean_on_relations_of(&self, other: &RunFigures) -> Option<f64> {
+        if self.relation_errors.len() != other.relation_errors.len()
+            || self.relation_errors.is_empty()
+        {
+            return None;
+        }
+        let both: Vec<f64> = self
+            .relation_errors
+            .iter()
+            .zip(&other.relation_errors)
+            .filter_map(|(mine, theirs)| theirs.and(*mine))
+            .collect();
+        if both.len() == self.relations || both.is_empty() {
+            return None;
+        }
+        Some(both.iter().sum::<f64>() / both.len() as f64)
     }
 }
 

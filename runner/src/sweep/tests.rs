@@ -279,8 +279,10 @@ fn variant_with(name: &str, trans_mean: Option<f64>) -> VariantReport {
             relations: 10,
             relations_missing: 0,
             relations_over_0_5_m: 0,
+            relation_errors: Vec::new(),
         }),
         ratio: None,
+        default_trans_mean: None,
         error: trans_mean.is_none().then(|| "could not run".to_string()),
     }
 }
@@ -352,6 +354,7 @@ fn relations_along_a_trajectory_hold_its_own_motion_per_metre_or_30_degrees() {
         relations: 0,
         relations_missing: 0,
         relations_over_0_5_m: 0,
+        relation_errors: Vec::new(),
     };
     figures.score(&trajectory, &relations).expect("scores");
     assert_eq!((figures.trans_mean, figures.relations), (0.0, 6));
@@ -373,4 +376,66 @@ fn relations_along_a_trajectory_hold_its_own_motion_per_metre_or_30_degrees() {
     // Too short a drive has no segment.
     assert!(relations_along(&trajectory[..5]).is_empty());
     assert!(relations_along(&[]).is_empty());
+}
+
+/// Figures of `poses` (at times 0, 1, 2, …) scored with `relations`.
+fn scored(poses: &[(f64, Pose2)], relations: &[Relation]) -> RunFigures {
+    let mut figures = RunFigures {
+        trans_mean: f64::NAN,
+        trans_max: f64::NAN,
+        rot_mean_deg: f64::NAN,
+        ms_per_scan_median: 0.0,
+        map_points: 0,
+        scans: poses.len(),
+        relations: 0,
+        relations_missing: 0,
+        relations_over_0_5_m: 0,
+        relation_errors: Vec::new(),
+    };
+    figures.score(poses, relations).expect("scores");
+    figures
+}
+
+#[test]
+fn a_variant_scored_on_fewer_relations_is_compared_with_the_default_on_the_same_ones() {
+    // Five records a metre apart along x, and relations between them.
+    let at = |t: f64, x: f64| (t, Pose2::new(x, 0.0, 0.0));
+    let relation = |t1: f64, t2: f64| Relation {
+        t1,
+        t2,
+        delta: Pose2::new(t2 - t1, 0.0, 0.0),
+    };
+    let relations = [
+        relation(0.0, 1.0),
+        relation(1.0, 2.0),
+        relation(0.0, 2.0),
+        relation(2.0, 4.0),
+    ];
+    // The default errs by 0.3 m at record 1 and by 0.02 m at record 4: 0.155 m over all four
+    // relations, 0.01 m over the two between even records.
+    let default = scored(
+        &[at(0.0, 0.0), at(1.0, 1.3), at(2.0, 2.0), at(3.0, 3.0), at(4.0, 4.02)],
+        &relations,
+    );
+    assert!((default.trans_mean - 0.155).abs() < 1e-12, "{default:?}");
+    // A run of the even records (as `scans/2`) errs by 0.2 m at record 4: 0.1 m over the two
+    // relations it can score.
+    let halved = scored(&[at(0.0, 0.0), at(2.0, 2.0), at(4.0, 4.2)], &relations);
+    assert_eq!((halved.relations, halved.relations_missing), (2, 2));
+    assert!((halved.trans_mean - 0.1).abs() < 1e-12, "{halved:?}");
+    let report = variant_report("scans/2", Ok(halved), &default);
+    // Ten times the default on the same relations, not 0.65 times its mean over all four.
+    let same = report.default_trans_mean.expect("a default on the same relations");
+    assert!((same - 0.01).abs() < 1e-12, "{report:?}");
+    assert!((report.ratio.expect("a ratio") - 10.0).abs() < 1e-9, "{report:?}");
+    // Over its bound max(2 × 0.01, 0.05) m, though within the whole default's 0.31 m.
+    assert_eq!(robustness_figures(default.trans_mean, &[report]).0, 1);
+    // A variant that scores every relation keeps the plain ratio.
+    let full = scored(
+        &[at(0.0, 0.0), at(1.0, 1.0), at(2.0, 2.0), at(3.0, 3.0), at(4.0, 4.0)],
+        &relations,
+    );
+    let report = variant_report("full", Ok(full), &default);
+    assert_eq!(report.default_trans_mean, None);
+    assert_eq!(report.ratio, Some(0.0));
 }
