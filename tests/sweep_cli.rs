@@ -136,7 +136,11 @@ fn sweep_reports_the_default_and_each_variant_with_consistent_ratios() {
     // which score all of them, have no such figure.
     let same = f(&halved["default_trans_mean"]);
     assert!(same > 0.0 && same != base, "{halved}");
-    assert!(variants[1].get("default_trans_mean").is_none(), "{}", variants[1]);
+    assert!(
+        variants[1].get("default_trans_mean").is_none(),
+        "{}",
+        variants[1]
+    );
     assert_eq!(
         count(&variants[1], "relations"),
         count(default, "relations")

@@ -45,6 +45,16 @@ const CELL_DISC: f64 = 0.75;
 /// The raster grows to at most this many cells a side; points beyond it are not scored.
 const MAX_CELLS: usize = 4096;
 
+/// The likelihood kernel reaches at most this many cells either way of a point (2σ over the
+/// resolution; the default 2): every map point draws a square of twice that side.
+const MAX_KERNEL_CELLS: f64 = 64.0;
+
+/// A window's count of steps either way: the ratio rounded down, but within a hair of an
+/// integer taken as that integer (0.3° / 0.1° is 2.9999999999999996 in floating point).
+fn steps_within(window: f64, step: f64) -> f64 {
+    (window / step * (1.0 + 1e-12)).floor()
+}
+
 impl CorrelativeParams {
     /// Checks every value; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -66,6 +76,17 @@ impl CorrelativeParams {
                 format!(
                     "{} m is {steps:.0} cells of {} m either way; at most 200",
                     self.window_xy, self.resolution
+                ),
+            ));
+        }
+        let kernel_cells = 2.0 * self.sigma / self.resolution;
+        if kernel_cells > MAX_KERNEL_CELLS {
+            return Err(ConfigError::invalid(
+                "matcher.correlative.sigma",
+                format!(
+                    "{} m reaches {kernel_cells:.0} cells of {} m either way; at most \
+                     {MAX_KERNEL_CELLS} (each map point draws a square of that reach)",
+                    self.sigma, self.resolution
                 ),
             ));
         }
@@ -106,6 +127,9 @@ pub struct CorrelativeSearch {
     rect: (usize, usize, usize, usize),
     kernel: Vec<u8>,
     radius: usize,
+    /// Whether only a point in a cell draws the kernel's peak (255) there: true while the
+    /// kernel one cell off the peak is below it (σ under about 16 cells).
+    peak_alone: bool,
     neighbours: Vec<Neighbour>,
     /// The corner cells of every rotation's scan points, rotation after rotation.
     cells: Vec<(usize, usize)>,
@@ -167,7 +191,8 @@ impl CorrelativeSearch {
             {
                 continue; // its kernel misses the held cells
             }
-            if (x0..x1).contains(&cx)
+            if self.peak_alone
+                && (x0..x1).contains(&cx)
                 && (y0..y1).contains(&cy)
                 && self.raster[(cy - y0) * w + cx - x0] == 255
             {
@@ -221,7 +246,7 @@ impl CorrelativeSearch {
 
     /// The window's rotation steps either way of the prediction.
     fn turns(&self) -> i64 {
-        (self.params.window_deg / self.params.angle_step_deg).floor() as i64
+        steps_within(self.params.window_deg, self.params.angle_step_deg) as i64
     }
 
     /// Lays the raster out around `guess`, large enough for the window and the scan's reach,
@@ -251,6 +276,12 @@ impl CorrelativeSearch {
                     .push((255.0 * (-0.5 * d2 / s2).exp()).round() as u8);
             }
         }
+        // The entry one cell right of the peak (none for a kernel of one cell).
+        let width = 2 * self.radius + 1;
+        self.peak_alone = self
+            .kernel
+            .get(self.radius * width + self.radius + 1)
+            .is_none_or(|&v| v < 255);
         let reach_points = local
             .iter()
             .map(|q| q.coords.norm())
@@ -700,5 +731,95 @@ mod tests {
         // Both sides of the threshold were exercised.
         assert!(found > 40 && pruned > 40, "{found} found, {pruned} pruned");
         assert!(scored >= 12, "{scored} scored alone");
+    }
+
+    /// A map of `points`, inserted in that order: each one the return of a one-beam scan
+    /// taken a metre west of it.
+    fn map_of(points: &[Point2<f64>]) -> Reference<QuadTree> {
+        let geometry = qicp_core::BeamGeometry {
+            angle_min: 0.0,
+            angle_increment: 0.01,
+            max_range: 30.0,
+            min_range: 0.1,
+        };
+        let mut reference = Reference::new(QuadTree::default());
+        for p in points {
+            let scan = qicp_core::Scan::new(0.0, geometry, vec![1.0]).expect("a scan");
+            let at = Pose2::new(p.x - 1.0, p.y, 0.0);
+            reference.insert_scan(&scan, &at, None).expect("finite");
+        }
+        reference
+    }
+
+    #[test]
+    fn a_rotation_window_of_a_whole_number_of_steps_keeps_its_outer_step() {
+        // 0.3° / 0.1° is 2.9999999999999996 in floating point: floored, the window lost its
+        // outer step and a scan turned by 0.3° was not found.
+        let points: Vec<Point2<f64>> = [0.0f64, 1.5, 3.0, 4.5]
+            .iter()
+            .map(|a| Point2::new(20.0 * a.cos(), 20.0 * a.sin()))
+            .collect();
+        let reference = map_of(&points);
+        let mut search = CorrelativeSearch::new(CorrelativeParams {
+            window_xy: 0.05,
+            window_deg: 0.3,
+            angle_step_deg: 0.1,
+            ..CorrelativeParams::default()
+        });
+        assert_eq!(search.turns(), 3);
+        let guess = Pose2::new(0.0, 0.0, (-0.3f64).to_radians());
+        let found = search.search(&reference, &points, &guess).expect("a pose");
+        assert!(found.pose.theta.abs() < 1e-9, "{found:?}");
+        assert!((found.score - 1.0).abs() < 1e-9, "{found:?}");
+    }
+
+    #[test]
+    fn a_wide_kernel_draws_every_point_whatever_their_order() {
+        // At σ = 20 cells a point's neighbouring cell rounds to the kernel's peak too: the
+        // raster skipped the second of two points a cell apart, so that the search depended
+        // on the order of the map's points and disagreed with the score of its own guess.
+        let params = CorrelativeParams {
+            window_xy: 0.05,
+            window_deg: 0.5,
+            resolution: 0.05,
+            angle_step_deg: 0.5,
+            sigma: 1.0,
+        };
+        let (a, b) = (Point2::new(0.0, 0.0), Point2::new(0.05, 0.0));
+        let scan = [Point2::new(2.05, 0.0), Point2::new(-2.0, 0.0)];
+        let guess = Pose2::IDENTITY;
+        let mut answers = Vec::new();
+        for order in [[a, b], [b, a]] {
+            let reference = map_of(&order);
+            let mut search = CorrelativeSearch::new(params);
+            let (best, at_guess) = search
+                .search_among(&reference, &scan, &guess, None)
+                .expect("a pose");
+            let alone = search.score_among(&reference, &scan, &guess, 2);
+            assert_eq!(alone, Some(at_guess), "{order:?}");
+            answers.push(best);
+        }
+        assert_eq!(answers[0], answers[1]);
+    }
+
+    #[test]
+    fn a_kernel_reaching_too_far_is_refused_with_its_key() {
+        for sigma in [1e20, 10.0] {
+            let params = CorrelativeParams {
+                sigma,
+                ..CorrelativeParams::default()
+            };
+            let err = params.validate().expect_err("refused");
+            assert!(
+                err.to_string().contains("matcher.correlative.sigma"),
+                "{err}"
+            );
+        }
+        // The default reaches 2 cells either way, and at 1.4 times it 3.
+        let wider = CorrelativeParams {
+            sigma: 0.14,
+            ..CorrelativeParams::default()
+        };
+        assert!(wider.validate().is_ok());
     }
 }

@@ -82,7 +82,7 @@ pub struct Relevance {
     /// 1.5 × that), so memory and per-scan time stay bounded on a drive of any length, at the
     /// price of the places left behind: a loop longer than the window is matched against
     /// its own recent scans, not against its start. Each rebuild starts the map's age afresh
-    /// for re-anchoring's look-ups (`[matcher.revisit] age_scans`), so a window of fewer than
+    /// for re-anchoring's look-ups (`[matcher.revisit] age_scans`), so a window of at most
     /// twice `age_scans` scans never looks up its old map after its first rebuild. 0 keeps
     /// every relevant scan, as Alg. 1 reads. Default 0.
     pub window_scans: usize,

@@ -36,6 +36,8 @@ pub struct RevisitParams {
     pub enabled: bool,
     /// How old a map point must be to count as the old map, in relevant scans: a point is
     /// old once `age_scans` − 1 scans have entered the map after the one that brought it.
+    /// The first look-up waits for `age_scans` + 1 insertions (after the start, a clear or a
+    /// rebuild): one more than that, as the map's length before the oldest old scan is kept.
     /// Default 100: on the Freiburg logs 25-50 m of driving, well beyond the stretch a scan
     /// overlaps while exploring. At least 1 (a [`Revisit::new`] given 0 takes 1).
     pub age_scans: usize,
@@ -166,7 +168,7 @@ pub struct Proposal {
 
 /// The state of the look-ups: the map's size after each recent insertion, and a count of the
 /// matched scans.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct Revisit {
     params: RevisitParams,
     search: CorrelativeSearch,
@@ -176,6 +178,14 @@ pub struct Revisit {
     /// The run of agreeing look-ups so far: the matched count of the latest, its correction
     /// (re-anchored pose ∘ match⁻¹) and how many agreed.
     run: Option<(usize, Pose2, usize)>,
+}
+
+/// Look-ups with the default parameters, the search's window theirs (a derived default would
+/// take the correlative search's own, 0.5 m and 25°).
+impl Default for Revisit {
+    fn default() -> Self {
+        Self::new(RevisitParams::default())
+    }
 }
 
 impl Revisit {
@@ -215,7 +225,7 @@ impl Revisit {
             self.sizes.clear();
         }
         self.sizes.push_back(len);
-        while self.sizes.len() > self.params.age_scans + 1 {
+        while self.sizes.len() > self.params.age_scans.saturating_add(1) {
             self.sizes.pop_front();
         }
     }

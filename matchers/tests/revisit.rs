@@ -321,3 +321,31 @@ fn a_map_given_new_ids_is_not_looked_up_until_it_is_old_again() {
         "look-ups resume"
     );
 }
+
+#[test]
+fn default_look_ups_search_the_revisit_window_not_the_correlative_one() {
+    // A derived default took the correlative search's 0.5 m and 25°, not the 1 m and 3° its
+    // parameters report.
+    let derived = format!("{:?}", Revisit::default());
+    let built = format!("{:?}", Revisit::new(RevisitParams::default()));
+    assert_eq!(derived, built);
+    assert!(built.contains("window_deg: 3.0"), "{built}");
+}
+
+#[test]
+fn look_ups_built_with_the_largest_age_count_insertions_without_overflow() {
+    let mut revisit = Revisit::new(RevisitParams {
+        age_scans: usize::MAX,
+        every: 1,
+        ..RevisitParams::default()
+    });
+    let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
+    let reference = map(drift, 3, &mut revisit);
+    let truth = pose(4);
+    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
+    // No map is ever that old.
+    assert_eq!(
+        revisit.propose(&reference, scan.points(), &(drift * truth)),
+        None
+    );
+}

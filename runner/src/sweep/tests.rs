@@ -414,7 +414,13 @@ fn a_variant_scored_on_fewer_relations_is_compared_with_the_default_on_the_same_
     // The default errs by 0.3 m at record 1 and by 0.02 m at record 4: 0.155 m over all four
     // relations, 0.01 m over the two between even records.
     let default = scored(
-        &[at(0.0, 0.0), at(1.0, 1.3), at(2.0, 2.0), at(3.0, 3.0), at(4.0, 4.02)],
+        &[
+            at(0.0, 0.0),
+            at(1.0, 1.3),
+            at(2.0, 2.0),
+            at(3.0, 3.0),
+            at(4.0, 4.02),
+        ],
         &relations,
     );
     assert!((default.trans_mean - 0.155).abs() < 1e-12, "{default:?}");
@@ -425,14 +431,25 @@ fn a_variant_scored_on_fewer_relations_is_compared_with_the_default_on_the_same_
     assert!((halved.trans_mean - 0.1).abs() < 1e-12, "{halved:?}");
     let report = variant_report("scans/2", Ok(halved), &default);
     // Ten times the default on the same relations, not 0.65 times its mean over all four.
-    let same = report.default_trans_mean.expect("a default on the same relations");
+    let same = report
+        .default_trans_mean
+        .expect("a default on the same relations");
     assert!((same - 0.01).abs() < 1e-12, "{report:?}");
-    assert!((report.ratio.expect("a ratio") - 10.0).abs() < 1e-9, "{report:?}");
+    assert!(
+        (report.ratio.expect("a ratio") - 10.0).abs() < 1e-9,
+        "{report:?}"
+    );
     // Over its bound max(2 × 0.01, 0.05) m, though within the whole default's 0.31 m.
     assert_eq!(robustness_figures(default.trans_mean, &[report]).0, 1);
     // A variant that scores every relation keeps the plain ratio.
     let full = scored(
-        &[at(0.0, 0.0), at(1.0, 1.0), at(2.0, 2.0), at(3.0, 3.0), at(4.0, 4.0)],
+        &[
+            at(0.0, 0.0),
+            at(1.0, 1.0),
+            at(2.0, 2.0),
+            at(3.0, 3.0),
+            at(4.0, 4.0),
+        ],
         &relations,
     );
     let report = variant_report("full", Ok(full), &default);
