@@ -45,9 +45,12 @@ impl Default for AteOptions {
 /// 2012 with a single segment length d = `rpe_segment_m`): from every associated pose i, the
 /// segment ends at the first pose j whose true path length from i reaches d; the segment's
 /// error is `E = inv(inv(truthᵢ)·truthⱼ) · (inv(estᵢ)·estⱼ)`; `rpe_trans_per_m` is the mean
-/// of `|translation(E)| / d` (m per m; ×100 for %) and `rpe_rot_deg_per_m` the mean of
-/// `|angle(E)| / d` in degrees per metre. Independent of the alignment. NaN when the drive is
-/// shorter than d.
+/// of `|translation(E)| / Lᵢⱼ` (m per m; ×100 for %) and `rpe_rot_deg_per_m` the mean of
+/// `|angle(E)| / Lᵢⱼ` in degrees per metre, with Lᵢⱼ the segment's own true path length.
+/// KITTI's devkit divides by d, which its 10 Hz poses make the same; poses farther apart
+/// overshoot d by up to their spacing, and dividing by d would count that overshoot as error
+/// (poses 2 m apart at d = 1 m read a 1 % drift as 2 %). Independent of the alignment. NaN
+/// when the drive is shorter than d.
 ///
 /// **Final error**: the ATE error of the last pair, i.e. how far the aligned estimate ends
 /// from the truth; `path_length_m` is the true path length over the associated poses.
@@ -195,7 +198,7 @@ pub fn evaluate_ate(
         s.push(acc);
     }
 
-    // KITTI-style RPE with one segment length d.
+    // KITTI-style RPE with one segment length d, per metre of each segment's own length.
     let (mut segments, mut trans_sum, mut rot_sum) = (0usize, 0.0, 0.0);
     for i in 0..n {
         let j = s.partition_point(|&sj| sj < s[i] + d);
@@ -205,8 +208,10 @@ pub fn evaluate_ate(
         let (ei, ti) = pairs[i];
         let (ej, tj) = pairs[j];
         let err = ti.between(&tj).inverse() * ei.between(&ej);
-        trans_sum += err.x.hypot(err.y) / d;
-        rot_sum += err.theta.abs().to_degrees() / d;
+        // At least d: the segment ends where its path length reaches d.
+        let length = s[j] - s[i];
+        trans_sum += err.x.hypot(err.y) / length;
+        rot_sum += err.theta.abs().to_degrees() / length;
         segments += 1;
     }
     let per_segment = |sum: f64| {

@@ -430,6 +430,24 @@ mod tests {
     }
 
     #[test]
+    fn rpe_per_metre_divides_by_the_length_each_segment_covers() {
+        // The same 1 % drift with poses 2 m and 0.3 m apart: every segment of 1 m overshoots
+        // (to 2 m, and to 1.2 m), and divided by the nominal metre the drift read 2 % and
+        // 1.2 %.
+        for step in [2.0, 0.3] {
+            let truth: Vec<Stamped> = (0..60)
+                .map(|i| (f64::from(i), Pose2::new(step * f64::from(i), 0.0, 0.0)))
+                .collect();
+            let est: Vec<Stamped> = truth
+                .iter()
+                .map(|(t, p)| (*t, Pose2::new(p.x * 1.01, 0.0, 0.0)))
+                .collect();
+            let r = evaluate_ate(&est, &truth, &AteOptions::default()).unwrap();
+            assert!((r.rpe_trans_per_m - 0.01).abs() < 1e-9, "{step}: {r:?}");
+        }
+    }
+
+    #[test]
     fn association_pairs_the_shorter_trajectory() {
         let truth = drive(100); // 10 Hz
         let est: Vec<Stamped> = truth
