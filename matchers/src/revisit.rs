@@ -49,7 +49,9 @@ pub struct RevisitParams {
     /// 0.2.
     pub max_miss: f64,
     /// The re-anchored pose explains the scan in the old map by at least this much (of the
-    /// correlative score) better than the match. Default 0.2.
+    /// correlative score) better than the match. Default 0.2. Above 0: at 0 the match itself
+    /// could be proposed, and a re-anchoring that moves nothing would still pass the match
+    /// by odometry's veto.
     pub min_gain: f64,
     /// Half-width of the translation window around the match (m). Default 1.0: the drift
     /// beyond ICP's first gate that a revisit should still pull in.
@@ -127,13 +129,17 @@ impl RevisitParams {
                 format!("{} must be in 1..=1000000", self.every),
             ));
         }
-        for (key, v) in [
-            ("matcher.revisit.max_miss", self.max_miss),
-            ("matcher.revisit.min_gain", self.min_gain),
-        ] {
-            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
-                return Err(ConfigError::invalid(key, format!("{v} must be in [0, 1]")));
-            }
+        if !(self.max_miss.is_finite() && (0.0..=1.0).contains(&self.max_miss)) {
+            return Err(ConfigError::invalid(
+                "matcher.revisit.max_miss",
+                format!("{} must be in [0, 1]", self.max_miss),
+            ));
+        }
+        if !(self.min_gain.is_finite() && self.min_gain > 0.0 && self.min_gain <= 1.0) {
+            return Err(ConfigError::invalid(
+                "matcher.revisit.min_gain",
+                format!("{} must be in (0, 1]", self.min_gain),
+            ));
         }
         // The window is checked as a correlative search's, under this section's keys.
         self.search().validate().map_err(|e| match e {

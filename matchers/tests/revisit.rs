@@ -129,6 +129,7 @@ fn revisit_values_out_of_range_are_refused_with_their_key() {
     for (key, value) in [
         ("max_miss", "1.5"),
         ("min_gain", "-0.1"),
+        ("min_gain", "0"),
         ("window_xy", "0"),
         ("window_deg", "200"),
         ("age_scans", "0"),
