@@ -15,7 +15,8 @@ pub struct IcpParams {
     /// Each time the estimate settles, the gate shrinks by `shrink`, down to this (m).
     /// Default 0.2.
     pub max_dist_end: f64,
-    /// Factor by which the gate (and IDC's window) shrinks once the estimate settles.
+    /// Factor by which the gate (and IDC's window) shrinks once the estimate settles, in
+    /// (0, 1).
     /// Default 0.5.
     pub shrink: f64,
     /// Iterations at one gate after which it shrinks even if the estimate has not settled.
@@ -103,10 +104,12 @@ impl IcpParams {
                 "must be at least 1",
             ));
         }
-        if !(self.shrink > 0.0 && self.shrink <= 1.0) {
+        // At 1 a gate above max_dist_end would never reach it: every match would run all its
+        // iterations and report no convergence.
+        if !(self.shrink > 0.0 && self.shrink < 1.0) {
             return Err(ConfigError::invalid(
                 "matcher.icp.shrink",
-                format!("{} must be in (0, 1]", self.shrink),
+                format!("{} must be in (0, 1)", self.shrink),
             ));
         }
         if !(self.trim.is_finite() && (self.trim == 0.0 || self.trim >= 1.0)) {

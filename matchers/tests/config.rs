@@ -117,6 +117,7 @@ fn out_of_range_values_name_the_key() {
             "matcher.icp.max_dist_end",
         ),
         ("[matcher.icp]\nshrink = 1.5", "matcher.icp.shrink"),
+        ("[matcher.icp]\nshrink = 1", "matcher.icp.shrink"),
         (
             "[matcher.wsm]\nsigma_range = 0.0",
             "matcher.wsm.sigma_range",

@@ -68,7 +68,10 @@ fn mean_nees(world: &SyntheticWorld, from: Pose2, trials: u64) -> f64 {
             r.pose.y - motion.y,
             qicp_core::normalize_angle(r.pose.theta - motion.theta),
         );
-        let info = r.covariance.try_inverse().expect("an invertible covariance");
+        let info = r
+            .covariance
+            .try_inverse()
+            .expect("an invertible covariance");
         sum += e.dot(&(info * e));
         n += 1.0;
     }
