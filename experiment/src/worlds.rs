@@ -76,7 +76,7 @@ pub(super) fn run_worlds(
         source: summaries[0].source.clone(),
         config: args.config.display().to_string(),
         world_seeds: seeds,
-        noise_seeds: (0..n as u64).map(|k| first_noise + k).collect(),
+        noise_seeds: (0..n as u64).map(|k| first_noise.wrapping_add(k)).collect(),
         scans: Spread::of(&summaries.iter().map(|s| s.scans as f64).collect::<Vec<_>>()),
         matchers,
         ratios,
