@@ -158,7 +158,9 @@ pub struct ExperimentSummary {
     pub wall_seconds: f64,
 }
 
-/// The median, minimum and maximum of the finite values among some (`null`s when none is).
+/// The median, minimum and maximum of the finite values among some (`null`s when none is),
+/// and how many of them were finite: a world whose figure is not a number (a matcher that
+/// fell back on every scan has no residual) is left out, and `n` says so.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct Spread {
     /// The median (of an even count, the mean of the two middle values).
@@ -167,6 +169,8 @@ pub struct Spread {
     pub min: Option<f64>,
     /// The greatest.
     pub max: Option<f64>,
+    /// The finite values the spread is of.
+    pub n: usize,
 }
 
 impl Spread {
@@ -188,6 +192,7 @@ impl Spread {
             median: Some(median),
             min: Some(v[0]),
             max: Some(v[n - 1]),
+            n,
         }
     }
 }

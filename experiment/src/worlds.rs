@@ -96,16 +96,29 @@ pub(super) fn run_worlds(
 
 /// The table printed after `--worlds`: median [min-max] of each figure.
 pub(super) fn worlds_table(report: &WorldsReport, kinds: &[String]) -> String {
-    let cell =
-        |v: Option<&Spread>, scale: f64, digits: usize| match v.map(|v| (v.median, v.min, v.max)) {
-            Some((Some(m), Some(lo), Some(hi))) => format!(
-                "{:.digits$} [{:.digits$}-{:.digits$}]",
+    let worlds = report.world_seeds.len();
+    // A spread over fewer worlds than were run says how many it is of.
+    let cell = |v: Option<&Spread>, scale: f64, digits: usize| match v {
+        Some(&Spread {
+            median: Some(m),
+            min: Some(lo),
+            max: Some(hi),
+            n,
+        }) => {
+            let of = if n < worlds {
+                format!(" ({n} of {worlds})")
+            } else {
+                String::new()
+            };
+            format!(
+                "{:.digits$} [{:.digits$}-{:.digits$}]{of}",
                 m * scale,
                 lo * scale,
                 hi * scale
-            ),
-            _ => "-".into(),
-        };
+            )
+        }
+        _ => "-".into(),
+    };
     let columns: [(&str, &str, f64, usize); 6] = [
         ("ATE m", "ate_rmse_m", 1.0, 2),
         ("final m", "final_error_m", 1.0, 2),
@@ -158,4 +171,36 @@ pub(super) fn worlds_table(report: &WorldsReport, kinds: &[String]) -> String {
     }
     text += &format!("\nwall time {:.1} s", report.wall_seconds);
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_figure_missing_in_some_worlds_says_how_many_worlds_it_is_of() {
+        // One world of four has no residual (its matcher fell back on every scan): the spread
+        // is of the other three, and the table says so instead of passing for all four.
+        let spread = Spread::of(&[0.1, f64::NAN, 0.3, 0.5]);
+        assert_eq!(
+            (spread.median, spread.min, spread.max, spread.n),
+            (Some(0.3), Some(0.1), Some(0.5), 3)
+        );
+        let full = Spread::of(&[0.2, 0.4, 0.6, 0.8]);
+        let figures = |s: Spread| BTreeMap::from([("residual_mean_mm", s), ("ate_rmse_m", full)]);
+        let report = WorldsReport {
+            source: "sim".into(),
+            config: "park.toml".into(),
+            world_seeds: vec![7, 8, 9, 10],
+            noise_seeds: vec![1, 2, 3, 4],
+            scans: Spread::of(&[800.0; 4]),
+            matchers: BTreeMap::from([("wsm".to_string(), figures(spread))]),
+            ratios: BTreeMap::new(),
+            wall_seconds: 1.0,
+        };
+        let table = worlds_table(&report, &["wsm".to_string()]);
+        assert!(table.contains("0.3 [0.1-0.5] (3 of 4)"), "{table}");
+        assert!(table.contains("0.50 [0.20-0.80] "), "{table}");
+        assert!(!table.contains("(4 of 4)"), "{table}");
+    }
 }
