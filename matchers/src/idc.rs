@@ -264,10 +264,11 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         if let Some(lambda) = prior {
             h += lambda;
         }
-        let covariance = h
-            .try_inverse()
-            .filter(|c| c.iter().all(|v| v.is_finite()))
-            .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0));
+        // An information matrix that cannot be inverted leaves a direction open: no match to
+        // trust (a placeholder covariance would pass for a real, very uncertain one).
+        let Some(covariance) = h.try_inverse().filter(|c| c.iter().all(|v| v.is_finite())) else {
+            return MatchResult::fallback(guess, Fallback::Degenerate);
+        };
         MatchResult {
             pose,
             covariance,

@@ -107,14 +107,14 @@ impl NormalEquations {
     /// model but not in its residuals (nearest samples lie within half a spacing), so its
     /// factor sits near 0.35 on a good match, and scaling by it made the covariance two to
     /// three times too small (NEES 5-33 against 3 on seeded rooms, corridors and posts).
-    /// The identity ("unknown") when H cannot be inverted.
+    /// `None` when H cannot be inverted (or its inverse is not finite): the pairs leave a
+    /// direction of the pose open, and the match is degenerate.
     #[must_use]
-    pub fn covariance(&self) -> Matrix3<f64> {
+    pub fn covariance(&self) -> Option<Matrix3<f64>> {
         self.information()
             .try_inverse()
             .map(|c| c * self.variance_factor().max(1.0))
             .filter(|c| c.iter().all(|v| v.is_finite()))
-            .unwrap_or_else(|| Matrix3::from_diagonal_element(1.0))
     }
 
     /// Solves for the step; `None` if the system is singular or the step not finite.
@@ -135,6 +135,33 @@ pub fn apply_step(pose: &Pose2, step: &Vector3<f64>) -> Pose2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_information_matrix_that_cannot_be_inverted_gives_no_covariance() {
+        // Pairs all on one point pin the translation but leave the rotation about it open:
+        // no covariance (the identity that stood in for one passed for a real match's).
+        let mut ne = NormalEquations::default();
+        for _ in 0..5 {
+            ne.add(
+                &Point2::new(0.0, 0.0),
+                &Vector2::new(0.0, 0.0),
+                &Vector2::new(0.0, 0.0),
+                &Matrix2::identity(),
+            );
+        }
+        assert_eq!(ne.covariance(), None);
+        // With a second point the pose is fixed, and the covariance is H⁻¹ (the fit is exact,
+        // so the variance factor does not scale it down).
+        ne.add(
+            &Point2::new(1.0, 0.0),
+            &Vector2::new(1.0, 0.0),
+            &Vector2::new(0.0, 0.0),
+            &Matrix2::identity(),
+        );
+        let c = ne.covariance().expect("a covariance");
+        let h_inv = ne.information().try_inverse().expect("invertible");
+        assert!((c - h_inv).norm() < 1e-12, "{c} against {h_inv}");
+    }
 
     #[test]
     fn align_recovers_a_known_motion() {

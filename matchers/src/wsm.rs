@@ -276,7 +276,11 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
         let mut ne = self.normal_equations(reference, local, &scan_info, &pose);
         add_prior(&mut ne, prior.as_ref(), &guess, &pose);
         // Pfister et al.: covariance = H⁻¹, scaled by the a-posteriori variance factor.
-        let covariance = ne.covariance();
+        // A final system that cannot be inverted leaves a direction open: no match to trust
+        // (its placeholder covariance would pass for a real, very uncertain one).
+        let Some(covariance) = ne.covariance() else {
+            return MatchResult::fallback(guess, Fallback::Degenerate);
+        };
         MatchResult {
             pose,
             covariance,

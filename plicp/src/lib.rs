@@ -384,7 +384,10 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         }
         let mut ne = self.information(reference, local, &pose);
         qicp_matchers::wsm::add_prior(&mut ne, prior.map(|(l, _)| l), &guess, &pose);
-        let covariance = ne.covariance();
+        // A final system that cannot be inverted leaves a direction open: no match to trust.
+        let Some(covariance) = ne.covariance() else {
+            return MatchResult::fallback(guess, Fallback::Degenerate);
+        };
         MatchResult {
             pose,
             covariance,
