@@ -24,7 +24,10 @@ pub struct IdcParams {
     /// window_start_deg): Lu & Milios size Bw to the
     /// rotation error they expect, and a window far wider than odometry's error only lets
     /// the range rule jump to wrong rotations. 0 always starts at window_start_deg.
-    /// Default 2.
+    /// Default 2. The range rule runs only in stages whose window is wider than the end
+    /// window: where the first window is clamped to it (a prior tighter than half the end
+    /// window), or the schedule has one gate (`matcher.icp.max_dist_start` equal to
+    /// `max_dist_end`), IDC matches by the closest-point rule alone.
     pub window_sigmas: f64,
     /// With an odometry prior, the first gate is the narrowest of the schedule that still
     /// holds this many of the prior's translation standard deviations (yet at least one
