@@ -413,16 +413,22 @@ mod tests {
         assert!((r.final_error_m - 0.2).abs() < 1e-12);
     }
 
-    #[test]
-    fn rpe_measures_drift_per_metre() {
-        // Odometry that reads every 6.25 cm step 1 % long: 1 cm of error per metre.
-        let truth: Vec<Stamped> = (0..400)
-            .map(|i| (f64::from(i), Pose2::new(0.0625 * f64::from(i), 0.0, 0.0)))
+    /// `n` poses `step` m apart along x, and an estimate that reads every step 1 % long.
+    fn one_percent_long(step: f64, n: i32) -> (Vec<Stamped>, Vec<Stamped>) {
+        let truth: Vec<Stamped> = (0..n)
+            .map(|i| (f64::from(i), Pose2::new(step * f64::from(i), 0.0, 0.0)))
             .collect();
-        let est: Vec<Stamped> = truth
+        let est = truth
             .iter()
             .map(|(t, p)| (*t, Pose2::new(p.x * 1.01, 0.0, 0.0)))
             .collect();
+        (truth, est)
+    }
+
+    #[test]
+    fn rpe_measures_drift_per_metre() {
+        // Odometry that reads every 6.25 cm step 1 % long: 1 cm of error per metre.
+        let (truth, est) = one_percent_long(0.0625, 400);
         let r = evaluate_ate(&est, &truth, &AteOptions::default()).unwrap();
         assert!((r.rpe_trans_per_m - 0.01).abs() < 1e-9, "{r:?}");
         assert!((r.final_error_m - 0.01 * 0.0625 * 399.0).abs() < 1e-9);
@@ -435,13 +441,7 @@ mod tests {
         // (to 2 m, and to 1.2 m), and divided by the nominal metre the drift read 2 % and
         // 1.2 %.
         for step in [2.0, 0.3] {
-            let truth: Vec<Stamped> = (0..60)
-                .map(|i| (f64::from(i), Pose2::new(step * f64::from(i), 0.0, 0.0)))
-                .collect();
-            let est: Vec<Stamped> = truth
-                .iter()
-                .map(|(t, p)| (*t, Pose2::new(p.x * 1.01, 0.0, 0.0)))
-                .collect();
+            let (truth, est) = one_percent_long(step, 60);
             let r = evaluate_ate(&est, &truth, &AteOptions::default()).unwrap();
             assert!((r.rpe_trans_per_m - 0.01).abs() < 1e-9, "{step}: {r:?}");
         }

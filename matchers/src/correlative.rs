@@ -127,9 +127,6 @@ pub struct CorrelativeSearch {
     rect: (usize, usize, usize, usize),
     kernel: Vec<u8>,
     radius: usize,
-    /// Whether only a point in a cell draws the kernel's peak (255) there: true while the
-    /// kernel one cell off the peak is below it (σ under about 16 cells).
-    peak_alone: bool,
     neighbours: Vec<Neighbour>,
     /// The corner cells of every rotation's scan points, rotation after rotation.
     cells: Vec<(usize, usize)>,
@@ -177,6 +174,12 @@ impl CorrelativeSearch {
             .index()
             .within_radius(&centre, reach(w).hypot(reach(h)), &mut self.neighbours);
         let (x1, y1) = (x0 + w, y0 + h);
+        // Only a point in a cell draws the kernel's peak (255) there while the entry one cell
+        // right of the peak is below it (σ under about 16 cells; none for a one-cell kernel).
+        let peak_alone = self
+            .kernel
+            .get(self.radius * width + self.radius + 1)
+            .is_none_or(|&v| v < 255);
         for n in &self.neighbours {
             if below.is_some_and(|b| n.id >= b) {
                 continue;
@@ -191,7 +194,7 @@ impl CorrelativeSearch {
             {
                 continue; // its kernel misses the held cells
             }
-            if self.peak_alone
+            if peak_alone
                 && (x0..x1).contains(&cx)
                 && (y0..y1).contains(&cy)
                 && self.raster[(cy - y0) * w + cx - x0] == 255
@@ -276,12 +279,6 @@ impl CorrelativeSearch {
                     .push((255.0 * (-0.5 * d2 / s2).exp()).round() as u8);
             }
         }
-        // The entry one cell right of the peak (none for a kernel of one cell).
-        let width = 2 * self.radius + 1;
-        self.peak_alone = self
-            .kernel
-            .get(self.radius * width + self.radius + 1)
-            .is_none_or(|&v| v < 255);
         let reach_points = local
             .iter()
             .map(|q| q.coords.norm())

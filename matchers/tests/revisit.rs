@@ -270,15 +270,18 @@ fn look_ups_built_with_an_age_of_zero_do_not_panic() {
         ..RevisitParams::default()
     });
     assert_eq!(revisit.params().age_scans, 1);
+    // Every scan but the newest is old: the drifted copy is old map too, and fits the match.
+    assert_eq!(propose_on_a_drifted_room(&mut revisit), None);
+}
+
+/// The look-ups' proposal for scan 4 of the room, matched 1.5° and half a metre off, over a
+/// map of the room's four scans and three laid that far off.
+fn propose_on_a_drifted_room(revisit: &mut Revisit) -> Option<qicp_matchers::Proposal> {
     let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
-    let reference = map(drift, 3, &mut revisit);
+    let reference = map(drift, 3, revisit);
     let truth = pose(4);
     let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
-    // Every scan but the newest is old: the drifted copy is old map too, and fits the match.
-    assert_eq!(
-        revisit.propose(&reference, scan.points(), &(drift * truth)),
-        None
-    );
+    revisit.propose(&reference, scan.points(), &(drift * truth))
 }
 
 #[test]
@@ -340,13 +343,6 @@ fn look_ups_built_with_the_largest_age_count_insertions_without_overflow() {
         every: 1,
         ..RevisitParams::default()
     });
-    let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
-    let reference = map(drift, 3, &mut revisit);
-    let truth = pose(4);
-    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
     // No map is ever that old.
-    assert_eq!(
-        revisit.propose(&reference, scan.points(), &(drift * truth)),
-        None
-    );
+    assert_eq!(propose_on_a_drifted_room(&mut revisit), None);
 }

@@ -344,19 +344,7 @@ fn relations_along_a_trajectory_hold_its_own_motion_per_metre_or_30_degrees() {
     assert!((relations[0].delta.x - 1.0).abs() < 1e-9 && relations[0].t1 == 0.0);
     assert!((relations[5].delta.theta - 30f64.to_radians()).abs() < 1e-9);
     // The trajectory agrees with itself, and so does a copy moved and turned as a whole.
-    let mut figures = RunFigures {
-        trans_mean: f64::NAN,
-        trans_max: f64::NAN,
-        rot_mean_deg: f64::NAN,
-        ms_per_scan_median: 0.0,
-        map_points: 0,
-        scans: trajectory.len(),
-        relations: 0,
-        relations_missing: 0,
-        relations_over_0_5_m: 0,
-        relation_errors: Vec::new(),
-    };
-    figures.score(&trajectory, &relations).expect("scores");
+    let mut figures = scored(&trajectory, &relations);
     assert_eq!((figures.trans_mean, figures.relations), (0.0, 6));
     let offset = Pose2::new(-4.0, 2.5, 1.1);
     let moved: Vec<Stamped> = trajectory.iter().map(|(t, p)| (*t, offset * *p)).collect();
