@@ -419,7 +419,11 @@ fn table(summary: &ExperimentSummary, kinds: &[String]) -> String {
             .iter()
             .filter_map(|(k, v)| v.filter(|v| v.is_finite()).map(|v| format!("{k} {v:.3}")))
             .collect();
-            text += &format!("\n  {pair}: {}", parts.join(", "));
+            text += &format!(
+                "\n  {pair}: {} (means over the {} scans both matched)",
+                parts.join(", "),
+                r.scans_both_matched
+            );
         }
         text.push('\n');
     }

@@ -292,15 +292,18 @@ pub struct MatcherOutcome {
     pub extent: Option<plots::MapExtent>,
 }
 
-/// The two per-scan values an experiment keeps of every matcher, in full precision
-/// (`matches.csv` rounds them): 16 bytes per scan, for the boosted / incremental ratios
-/// (their median needs every scan's) and the paper's Fig. 4 panels.
+/// The three per-scan values an experiment keeps of every matcher, in full precision
+/// (`matches.csv` rounds them): 24 bytes per scan, for the boosted / incremental ratios
+/// (taken over the scans both matched; the per-scan median needs every scan's) and the
+/// paper's Fig. 4 panels.
 #[derive(Debug, Clone, Default)]
 pub struct PerScan {
     /// Residual correlation distance (mm); NaN for a fallback.
     pub residual_mm: Vec<f64>,
     /// Matching certainty (m²); NaN for a fallback.
     pub certainty: Vec<f64>,
+    /// Position standard deviation (mm); NaN for a fallback.
+    pub sigma_mm: Vec<f64>,
 }
 
 impl PerScan {
@@ -308,6 +311,7 @@ impl PerScan {
     pub fn push(&mut self, row: &ScanRow) {
         self.residual_mm.push(row.residual_mm);
         self.certainty.push(row.certainty);
+        self.sigma_mm.push(row.sigma_mm);
     }
 
     /// Scans held.
@@ -344,6 +348,21 @@ pub fn incremental_of(config: &MatcherConfig) -> Option<String> {
         .then(|| config.algorithm().to_string())
 }
 
+/// The mean of `boosted` over the mean of `incremental`, both over the scans where both are
+/// finite: where one matcher fell back and the other matched, neither's value counts, so the
+/// ratio compares the two on the same scans. NaN when they share none.
+fn ratio_of_means(boosted: &[f64], incremental: &[f64]) -> f64 {
+    let (mut sb, mut si, mut n) = (0.0, 0.0, 0usize);
+    for (b, i) in boosted.iter().zip(incremental) {
+        if b.is_finite() && i.is_finite() {
+            sb += b;
+            si += i;
+            n += 1;
+        }
+    }
+    if n == 0 { f64::NAN } else { sb / si }
+}
+
 /// Boosted / incremental ratios of every boosted kind whose twin also ran, by
 /// `"<boosted>/<incremental>"`.
 pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> BTreeMap<String, Ratios> {
@@ -367,14 +386,20 @@ pub(super) fn ratios(outcomes: &[MatcherOutcome]) -> BTreeMap<String, Ratios> {
             .map(|(cb, ci)| cb / ci)
             .filter(|r| r.is_finite())
             .collect();
-        let (sb, si) = (&b.summary, &i.summary);
+        let (pb, pi) = (&b.per_scan, &i.per_scan);
         let r = Ratios {
             ate: truth.map(|(ab, ai)| ab.ate_rmse_m / ai.ate_rmse_m),
             final_error: truth.map(|(ab, ai)| ab.final_error_m / ai.final_error_m),
             relations_trans: relations.map(|(rb, ri)| rb.trans_mean / ri.trans_mean),
-            residual: sb.residual_mean_mm / si.residual_mean_mm,
-            certainty: sb.certainty_mean / si.certainty_mean,
-            sigma: sb.sigma_mean_mm / si.sigma_mean_mm,
+            residual: ratio_of_means(&pb.residual_mm, &pi.residual_mm),
+            certainty: ratio_of_means(&pb.certainty, &pi.certainty),
+            sigma: ratio_of_means(&pb.sigma_mm, &pi.sigma_mm),
+            scans_both_matched: pb
+                .certainty
+                .iter()
+                .zip(&pi.certainty)
+                .filter(|(cb, ci)| cb.is_finite() && ci.is_finite())
+                .count(),
             certainty_per_scan_mean: per_scan.iter().sum::<f64>() / per_scan.len() as f64,
             // The mean of the middle two for an even count, as every other median reported.
             certainty_per_scan_median: qicp_eval::stats::median(&per_scan).unwrap_or(f64::NAN),
@@ -425,5 +450,16 @@ mod tests {
         assert!(err.contains("changed during the run"), "{err}");
         // One sentence, not a source line's indentation in the middle of it.
         assert!(!err.contains("  "), "{err}");
+    }
+
+    #[test]
+    fn a_ratio_of_means_compares_the_two_matchers_on_the_scans_both_matched() {
+        // Scan 1: the boosted matcher fell back; scan 2: the incremental one. Over each
+        // matcher's own scans the ratio would read (1 + 9 + 5) / 3 over (2 + 4 + 6) / 3 = 1.25.
+        let boosted = [1.0, f64::NAN, 9.0, 5.0];
+        let incremental = [2.0, 4.0, f64::NAN, 6.0];
+        assert!((ratio_of_means(&boosted, &incremental) - 6.0 / 8.0).abs() < 1e-12);
+        assert!(ratio_of_means(&[f64::NAN, 1.0], &[1.0, f64::NAN]).is_nan());
+        assert!(ratio_of_means(&[], &[]).is_nan());
     }
 }

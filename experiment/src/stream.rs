@@ -2,7 +2,7 @@
 //! outputs as the scans come, and keep what the scores and pictures need, not the records.
 //!
 //! What a matcher's run holds, besides its own map: the poses nearest the relations' times
-//! (a [`RelationProbe`]), the two per-scan values of [`PerScan`] (16 bytes a scan) and, only
+//! (a [`RelationProbe`]), the three per-scan values of [`PerScan`] (24 bytes a scan) and, only
 //! when the source has ground truth (which is held whole all the same), the whole trajectory
 //! for the ATE. The pictures read the trajectories back from their files.
 

@@ -117,12 +117,14 @@ pub struct Ratios {
     /// Mean translational relation error, with relations.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub relations_trans: Option<f64>,
-    /// Mean residual.
+    /// Mean residual, over the scans both matchers matched (neither fell back).
     pub residual: f64,
-    /// Mean certainty.
+    /// Mean certainty, over the scans both matched.
     pub certainty: f64,
-    /// Mean position σ.
+    /// Mean position σ, over the scans both matched.
     pub sigma: f64,
+    /// The scans both matched: the three means' scans.
+    pub scans_both_matched: usize,
     /// Mean of the per-scan certainty ratios (paper Fig. 4c-d).
     pub certainty_per_scan_mean: f64,
     /// Their median: the mean is at the mercy of a few near-degenerate incremental matches.
