@@ -260,6 +260,16 @@ pub struct MotionModel {
     /// to the previous pose. Default true. (The MIT CSAIL log stalls three times for four
     /// records and then jumps by up to 0.94 m and 85.5°; see the README.)
     pub stall_restart: bool,
+    /// Where odometry repeats one reading while the matches saw the robot move (as for
+    /// `stall_restart`), the repeated reading holds no motion: the stall's further records
+    /// are predicted at the laser's last velocity (its motion over the last record whose
+    /// match passed the check against a running level, as KISS-ICP predicts at constant
+    /// velocity with no odometry; none before the check has a level or with validation off,
+    /// where the last pose stands) and matched without odometry's prior, so that odometry's
+    /// veto does not hold them to a robot standing still. A log with no odometry at all
+    /// (every reading the same) is one such stall from its second record on. false predicts
+    /// a stall's records where the repeated reading says, with its prior. Default true.
+    pub stall_velocity: bool,
 }
 
 impl Default for MotionModel {
@@ -273,6 +283,7 @@ impl Default for MotionModel {
             sigma_theta_per_rad: 0.2,
             calibration_m: 0.0,
             stall_restart: true,
+            stall_velocity: true,
         }
     }
 }
@@ -451,6 +462,9 @@ pub struct Pipeline<M, I> {
     reference_frame: Pose2,
     /// Odometry and estimated laser pose of the previous record.
     last: Option<(Pose2, Pose2)>,
+    /// The laser's motion over the previous record, as matched (a re-anchoring's correction
+    /// left out): the prediction where odometry stalled ([`MotionModel::stall_velocity`]).
+    velocity: Pose2,
     /// The run of records that read the previous record's odometry (see [`OdometryRun`]).
     run: Option<OdometryRun>,
     /// The check before insertion, and its search.
@@ -487,6 +501,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             motion: MotionModel::default(),
             reference_frame: Pose2::IDENTITY,
             last: None,
+            velocity: Pose2::IDENTITY,
             run: None,
             validator: Validator::new(ValidationParams::default()),
             search: CorrelativeSearch::new(CorrelativeParams::default()),
@@ -537,18 +552,20 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
 
     /// Matches `scan` from `guess` and checks the match before it may enter the reference: a
     /// suspect match is searched again from the best pose of a correlative search around the
-    /// prediction, and one that stays poor is refused (see [`crate::validation`]).
+    /// prediction, and one that stays poor is refused (see [`crate::validation`]). The flag
+    /// says whether the match passed the check against a running level (none before the
+    /// check has seen enough matches to set one).
     fn match_checked(
         &mut self,
         scan: &qicp_core::Scan,
         guess: Pose2,
         prior: Option<Matrix3<f64>>,
-    ) -> (MatchResult, Check) {
+    ) -> (MatchResult, Check, bool) {
         let mut result = self
             .matcher
             .match_with_prior(&self.reference, scan, guess, prior);
         if !self.validator.params.enabled {
-            return (result, Check::UNCHECKED);
+            return (result, Check::UNCHECKED, false);
         }
         let local = scan.points();
         let level = self.validator.threshold();
@@ -565,7 +582,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                 residual: f64::NAN,
                 pairs: found as f64,
             },
-            Some(_) => return (result, Check::UNCHECKED),
+            Some(_) => return (result, Check::UNCHECKED, false),
         };
         let mut check = Check::UNCHECKED;
         if self.validator.params.search && is_poor(fit, level) {
@@ -586,6 +603,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                 }
             }
         }
+        let passed = result.fallback.is_none() && level.is_some() && !is_poor(fit, level);
         if result.fallback.is_none() {
             self.validator.record(fit);
             check.inlier_share = fit.share;
@@ -598,7 +616,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                 result = MatchResult::fallback(guess, Fallback::Refused);
             }
         }
-        (result, check)
+        (result, check, passed)
     }
 
     /// Looks the matched scan up in the old map ([`crate::revisit`]) and re-anchors the match
@@ -657,6 +675,10 @@ where
         // The odometry motion since the previous record, as a motion of the laser.
         // Corrected by the calibration fitted so far: the prediction and the prior's centre.
         let fresh = self.last.is_none_or(|(odom, _)| record.odometry != odom);
+        // A reading repeated while the matches saw the robot move holds no motion: the record
+        // is predicted at the last matched velocity, without odometry's prior.
+        let stalled =
+            !fresh && self.motion.stall_velocity && self.run.is_some_and(|run| run.contradicted);
         // The pose the step is taken from: the previous record's, except where odometry
         // stalled and the scans saw the robot move on meanwhile. Then the first new reading
         // holds the whole motion since the stall began, which the matches have followed in
@@ -668,6 +690,9 @@ where
                 Pose2::IDENTITY,
                 None,
             ),
+            Some((_, laser)) if stalled => {
+                (laser * self.velocity, self.velocity, Pose2::IDENTITY, None)
+            }
             Some((odom, laser)) => {
                 let raw = offset.inverse() * odom.between(&record.odometry) * offset;
                 let step = self.calibration.correct(&raw);
@@ -682,8 +707,12 @@ where
         };
         let guess = self.reference_frame.between(&predicted);
         // The prior's x-y block is isotropic, so it holds in the reference frame unrotated.
-        let prior = self.motion.information(&step);
-        let (mut result, mut check) = self.match_checked(&record.scan, guess, prior);
+        let prior = if stalled {
+            None
+        } else {
+            self.motion.information(&step)
+        };
+        let (mut result, mut check, passed) = self.match_checked(&record.scan, guess, prior);
         let boosted = self.policy.is_map();
         // On a revisit the match may be re-anchored to the old map: a correction of drift,
         // which odometry's veto must not take back.
@@ -737,6 +766,16 @@ where
         // In the world: the corrected laser pose times the inverse of the match's.
         let correction = check.reanchored.then(|| laser * matched.inverse());
         OdometryRun::follow(&mut self.run, fresh, contradicted, laser, correction);
+        // The motion as matched, where the match passed the check and stands (a re-anchoring's
+        // correction is drift, not velocity); none where it did not: a poor match's motion
+        // would carry its error into the next prediction.
+        if let Some((_, previous)) = self.last
+            && passed
+            && result.fallback.is_none()
+            && !check.withheld
+        {
+            self.velocity = previous.between(if check.reanchored { &matched } else { &laser });
+        }
         self.last = Some((record.odometry, laser));
         Estimate {
             pose: laser * offset.inverse(),

@@ -101,8 +101,9 @@ impl Matcher {
     /// Matches one scan. `ranges` (m) is read in place when it is a float64 array and
     /// converted otherwise; beam i points at `angle_min + i * angle_increment` (rad) in the
     /// laser frame. Readings at or above `range_max` are no-returns, below `range_min` dropped.
-    /// `odometry` is the robot's pose by odometry (x, y, θ) and `laser_offset` the laser's pose
-    /// on the robot.
+    /// `odometry` is the robot's pose by odometry (x, y, θ), the same pose every time where
+    /// there is none (each scan is then predicted at the last checked velocity;
+    /// `[matcher.motion] stall_velocity`), and `laser_offset` the laser's pose on the robot.
     #[pyo3(signature = (ranges, angle_min, angle_increment, *, odometry, timestamp,
                         range_max = DEFAULT_FLASER_MAX_RANGE, range_min = 0.0,
                         laser_offset = (0.0, 0.0, 0.0)))]
