@@ -94,17 +94,25 @@ pub struct BagArgs {
     /// The robot's frame, with --odom-frame.
     #[arg(long, default_value = "base_link", requires = "odom_frame")]
     pub base_frame: String,
+    /// The bag has no odometry: every scan is read with the same pose and predicted at the
+    /// last matched velocity (`[matcher.motion] stall_velocity`); the poses are the laser's.
+    #[arg(long, conflicts_with_all = ["odom_topic", "odom_frame", "subscribe"])]
+    pub no_odometry: bool,
 }
 
 impl BagArgs {
     /// The reader options these arguments give, with the CARMEN ones.
     #[must_use]
     pub fn log_options(&self, carmen: CarmenOptions) -> LogOptions {
-        let odometry = OdometrySource::from_names(
-            &self.odom_topic,
-            self.odom_frame.as_deref(),
-            &self.base_frame,
-        );
+        let odometry = if self.no_odometry {
+            OdometrySource::None
+        } else {
+            OdometrySource::from_names(
+                &self.odom_topic,
+                self.odom_frame.as_deref(),
+                &self.base_frame,
+            )
+        };
         let max_beams = carmen.max_beams;
         LogOptions {
             carmen,

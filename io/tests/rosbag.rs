@@ -168,6 +168,24 @@ fn odometry_is_interpolated_to_each_scan_and_scans_outside_it_are_counted() {
 }
 
 #[test]
+fn a_bag_read_without_odometry_keeps_every_scan_at_one_pose() {
+    // Scans only, with no odometry topic at all: every scan is a record, read with the
+    // identity as its odometry, none dropped for want of odometry.
+    let messages: Vec<_> = (0..12)
+        .map(|k| scan_msg(10.0 + f64::from(k) * 0.1))
+        .collect();
+    let opts = BagOptions::new("/scan", OdometrySource::None);
+    let mut reader = BagReader::new(Cursor::new(bag(&messages)), "t.mcap", &opts);
+    let records: Vec<Record> = reader.by_ref().collect::<Result<_, _>>().expect("readable");
+    assert_eq!(records.len(), 12);
+    assert!(records.iter().all(|r| r.odometry == Pose2::IDENTITY));
+    assert_eq!(reader.info().without_odometry, 0);
+    // The same bag asked for its odometry topic is refused, naming it.
+    let err = read_all(bag(&messages), &odom_topic()).expect_err("no /odom");
+    assert!(err.to_string().contains("no odometry topic /odom"), "{err}");
+}
+
+#[test]
 fn odometry_from_tf_between_the_named_frames() {
     let mut messages = Vec::new();
     for k in 0..5 {

@@ -23,6 +23,10 @@ pub enum OdometrySource {
         /// The robot's frame, e.g. `base_link`.
         base_frame: String,
     },
+    /// None: every scan is read with the same odometry pose, so that a matcher predicts it at
+    /// its last matched velocity (`[matcher.motion] stall_velocity`). The poses are the
+    /// laser's own (no robot frame to take an offset to).
+    None,
 }
 
 impl OdometrySource {
@@ -213,7 +217,7 @@ impl<R: Read> BagReader<R> {
                 last: None,
                 base_frame: match &opts.odometry {
                     OdometrySource::Tf { base_frame, .. } => Some(strip(base_frame).to_string()),
-                    OdometrySource::Topic(_) => None,
+                    OdometrySource::Topic(_) | OdometrySource::None => None,
                 },
                 static_tf: HashMap::new(),
                 ready: VecDeque::new(),
@@ -482,6 +486,10 @@ impl State {
         };
         let ranges = msg.ranges.iter().map(|&r| f64::from(r)).collect();
         let scan = Scan::new(msg.stamp, geometry, ranges).map_err(|e| format!("scan {n}: {e}"))?;
+        if matches!(self.opts.odometry, OdometrySource::None) {
+            self.emit(scan, &msg.frame_id, Pose2::IDENTITY);
+            return Ok(());
+        }
         match self.last {
             Some((t, pose)) if t == msg.stamp => self.emit(scan, &msg.frame_id, pose),
             Some((t, _)) if t > msg.stamp => {
