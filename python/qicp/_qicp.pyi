@@ -167,13 +167,14 @@ def read_bag(
     path: _StrPath,
     *,
     scan_topic: str = "/scan",
-    odom_topic: str = "/odom",
+    odom_topic: Optional[str] = "/odom",
     odom_frame: Optional[str] = None,
     base_frame: str = "base_link",
     max_beams: int = 10000,
 ) -> Log:
     """Streams the laser records of a ROS 2 bag (MCAP): LaserScan with odometry from a topic
-    or, with ``odom_frame``, from /tf, interpolated to each scan's stamp."""
+    or, with ``odom_frame``, from /tf, interpolated to each scan's stamp; with
+    ``odom_topic=None`` and no ``odom_frame``, every scan at one pose (no odometry)."""
 
 def evaluate_relations(
     trajectory: _Trajectory, relations_path: _StrPath, *, max_dt: float = 0.1

@@ -145,15 +145,16 @@ pub(crate) fn read_carmen(
 
 /// Streams the laser records of a ROS 2 bag (rosbag2, MCAP storage), as `qicp match BAG`
 /// reads them: scans from `scan_topic`, odometry from `odom_topic` or, with `odom_frame`, from
-/// the /tf transform `odom_frame` -> `base_frame`, interpolated to each scan's stamp. A
-/// missing topic raises `QicpError` listing the bag's topics.
+/// the /tf transform `odom_frame` -> `base_frame`, interpolated to each scan's stamp; with
+/// `odom_topic=None` and no `odom_frame`, none: every scan at one pose (as `qicp match
+/// --no-odometry`). A missing topic raises `QicpError` listing the bag's topics.
 #[pyfunction]
 #[pyo3(signature = (path, *, scan_topic = "/scan", odom_topic = "/odom", odom_frame = None,
                     base_frame = "base_link", max_beams = DEFAULT_MAX_BEAMS))]
 pub(crate) fn read_bag(
     path: PathBuf,
     scan_topic: &str,
-    odom_topic: &str,
+    odom_topic: Option<&str>,
     odom_frame: Option<String>,
     base_frame: &str,
     max_beams: usize,
@@ -166,7 +167,10 @@ pub(crate) fn read_bag(
         };
         return Err(QicpError::new_err(format!("{}: {why}", path.display())));
     }
-    let odometry = OdometrySource::from_names(odom_topic, odom_frame.as_deref(), base_frame);
+    let odometry = match (odom_topic, odom_frame.as_deref()) {
+        (None, None) => OdometrySource::None,
+        (topic, frame) => OdometrySource::from_names(topic.unwrap_or("/odom"), frame, base_frame),
+    };
     let options = LogOptions {
         bag: BagOptions {
             max_beams,

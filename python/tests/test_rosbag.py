@@ -210,6 +210,12 @@ def test_bag_errors_name_what_is_missing(qicp_bin, records, bag, tmp_path):
     write_bag(lonely, records[:20], odometry=False)
     cli = run_cli(qicp_bin, "match", lonely, "--matcher", "wsm", "--out", tmp_path / "c")
     assert cli.returncode != 0 and "20 scans but no odometry topic /odom" in cli.stderr
+    # Read without odometry, every scan is a record at one pose.
+    cli = run_cli(qicp_bin, "match", lonely, "--matcher", "wsm", "--out", tmp_path / "e", "--no-odometry")
+    assert cli.returncode == 0, cli.stderr
+    assert len((tmp_path / "e" / "trajectory.tum").read_text().splitlines()) == 20
+    unmoved = list(qicp.read_bag(lonely, odom_topic=None))
+    assert len(unmoved) == 20 and all(r.odometry == (0.0, 0.0, 0.0) for r in unmoved)
     cli = run_cli(qicp_bin, "match", bag, "--matcher", "wsm", "--out", tmp_path / "d", "--odom-frame", "odom")
     assert cli.returncode != 0 and "no transform odom -> base_link on /tf" in cli.stderr
 
