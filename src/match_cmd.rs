@@ -95,7 +95,7 @@ pub struct BagArgs {
     #[arg(long, default_value = "base_link", requires = "odom_frame")]
     pub base_frame: String,
     /// The bag has no odometry: every scan is read with the same pose and predicted at the
-    /// last matched velocity (`[matcher.motion] stall_velocity`); the poses are the laser's.
+    /// last checked velocity (`[matcher.motion] stall_velocity`); the poses are the laser's.
     #[arg(long, conflicts_with_all = ["odom_topic", "odom_frame", "subscribe"])]
     pub no_odometry: bool,
 }

@@ -462,8 +462,9 @@ pub struct Pipeline<M, I> {
     reference_frame: Pose2,
     /// Odometry and estimated laser pose of the previous record.
     last: Option<(Pose2, Pose2)>,
-    /// The laser's motion over the previous record, as matched (a re-anchoring's correction
-    /// left out): the prediction where odometry stalled ([`MotionModel::stall_velocity`]).
+    /// The laser's motion over the last record whose match passed the check, as matched (a
+    /// re-anchoring's correction left out): the prediction where odometry stalled
+    /// ([`MotionModel::stall_velocity`]). The identity until a match has passed.
     velocity: Pose2,
     /// The run of records that read the previous record's odometry (see [`OdometryRun`]).
     run: Option<OdometryRun>,
@@ -676,7 +677,7 @@ where
         // Corrected by the calibration fitted so far: the prediction and the prior's centre.
         let fresh = self.last.is_none_or(|(odom, _)| record.odometry != odom);
         // A reading repeated while the matches saw the robot move holds no motion: the record
-        // is predicted at the last matched velocity, without odometry's prior.
+        // is predicted at the last checked velocity, without odometry's prior.
         let stalled =
             !fresh && self.motion.stall_velocity && self.run.is_some_and(|run| run.contradicted);
         // The pose the step is taken from: the previous record's, except where odometry
@@ -767,8 +768,8 @@ where
         let correction = check.reanchored.then(|| laser * matched.inverse());
         OdometryRun::follow(&mut self.run, fresh, contradicted, laser, correction);
         // The motion as matched, where the match passed the check and stands (a re-anchoring's
-        // correction is drift, not velocity); none where it did not: a poor match's motion
-        // would carry its error into the next prediction.
+        // correction is drift, not velocity); elsewhere the last such motion stays: a poor
+        // match's motion would carry its error into the next prediction.
         if let Some((_, previous)) = self.last
             && passed
             && result.fallback.is_none()

@@ -24,7 +24,7 @@ pub enum OdometrySource {
         base_frame: String,
     },
     /// None: every scan is read with the same odometry pose, so that a matcher predicts it at
-    /// its last matched velocity (`[matcher.motion] stall_velocity`). The poses are the
+    /// its last checked velocity (`[matcher.motion] stall_velocity`). The poses are the
     /// laser's own (no robot frame to take an offset to).
     None,
 }
