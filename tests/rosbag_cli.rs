@@ -35,10 +35,9 @@ fn trajectory(path: &Path) -> Vec<[f64; 3]> {
         .collect()
 }
 
-#[test]
-fn an_experiment_on_a_converted_bag_scores_like_the_log() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let bag = dir.path().join("intel.mcap");
+/// `qicp convert` of the first 600 Intel records into `dir/intel.mcap`.
+fn first_600_intel_scans_as_a_bag(dir: &Path) -> PathBuf {
+    let bag = dir.join("intel.mcap");
     let out = qicp(&[
         "convert",
         intel().to_str().expect("utf-8"),
@@ -51,6 +50,13 @@ fn an_experiment_on_a_converted_bag_scores_like_the_log() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    bag
+}
+
+#[test]
+fn an_experiment_on_a_converted_bag_scores_like_the_log() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bag = first_600_intel_scans_as_a_bag(dir.path());
     let mut runs = Vec::new();
     for (name, log) in [("log", intel()), ("bag", bag.clone())] {
         let config = dir.path().join(format!("{name}.toml"));
@@ -100,21 +106,8 @@ fn an_experiment_on_a_converted_bag_scores_like_the_log() {
 #[test]
 fn a_bag_matched_without_its_odometry_follows_the_run_with_it() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let bag = dir.path().join("intel.mcap");
+    let bag = first_600_intel_scans_as_a_bag(dir.path());
     let bag_arg = bag.to_str().expect("utf-8");
-    let intel = intel();
-    let out = qicp(&[
-        "convert",
-        intel.to_str().expect("utf-8"),
-        bag_arg,
-        "--max-records",
-        "600",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let mut runs = Vec::new();
     for (name, flag) in [("odometry", None), ("none", Some("--no-odometry"))] {
         let run_dir = dir.path().join(name);

@@ -36,6 +36,18 @@ fn record_in(world: &SyntheticWorld, k: usize, odometry: Pose2) -> Record {
     }
 }
 
+/// Scan `k` of the room seen from `pose` (its noise seeded by `k`), read with `odometry`.
+fn room_record_at(pose: &Pose2, k: usize, odometry: Pose2) -> Record {
+    let mut scan = SyntheticWorld::room().scan(pose, 0.005, k as u64 + 1);
+    scan.timestamp = k as f64;
+    Record {
+        scan,
+        odometry,
+        truth: Some(*pose),
+        laser_offset: Pose2::IDENTITY,
+    }
+}
+
 /// Odometry that follows the truth until scan `at`, where the wheels slip and it turns by
 /// `slip` at once; its increments are right again after.
 fn slipping_odometry(k: usize, at: usize, slip: Pose2) -> Pose2 {
@@ -588,20 +600,11 @@ fn turning(k: usize) -> Pose2 {
 /// for scans 10 to 13 and then reads the truth again (a stalled reading that catches up, as
 /// the MIT CSAIL log's does three times): the worst heading error (deg) from scan 14 on.
 fn stalled_turn_heading_error(config: MatcherConfig) -> f64 {
-    let world = SyntheticWorld::room();
     let mut odometry = config.build().expect("builds");
     let mut worst = 0.0f64;
     for k in 0..30 {
-        let mut scan = world.scan(&turning(k), 0.005, k as u64 + 1);
-        scan.timestamp = k as f64;
         let read = if (10..14).contains(&k) { 9 } else { k };
-        let r = Record {
-            scan,
-            odometry: turning(read),
-            truth: Some(turning(k)),
-            laser_offset: Pose2::IDENTITY,
-        };
-        let e = odometry.process(&r);
+        let e = odometry.process(&room_record_at(&turning(k), k, turning(read)));
         if k >= 14 {
             let off = qicp_core::normalize_angle(e.pose.theta - turning(k).theta);
             worst = worst.max(off.abs().to_degrees());
@@ -648,21 +651,12 @@ fn turning_at(deg: f64, k: usize) -> Pose2 {
 /// Runs `config` over 30 scans of a turn at `deg` a scan with no odometry: every record reads
 /// the same pose, as a log without odometry does. The worst heading error (deg).
 fn turn_without_odometry(config: MatcherConfig, deg: f64) -> f64 {
-    let world = SyntheticWorld::room();
     let mut odometry = config.build().expect("builds");
     let start = turning_at(deg, 0);
     let mut worst = 0.0f64;
     for k in 0..30 {
         let truth = turning_at(deg, k);
-        let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
-        scan.timestamp = k as f64;
-        let r = Record {
-            scan,
-            odometry: Pose2::IDENTITY,
-            truth: None,
-            laser_offset: Pose2::IDENTITY,
-        };
-        let e = odometry.process(&r);
+        let e = odometry.process(&room_record_at(&truth, k, Pose2::IDENTITY));
         let off = qicp_core::normalize_angle(e.pose.theta - start.between(&truth).theta);
         worst = worst.max(off.abs().to_degrees());
     }
