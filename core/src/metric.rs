@@ -296,17 +296,28 @@ impl CorrespondenceMetric for MatchingRange {
             }
             let reach_sq = reach * reach;
             let mut best: Option<(f64, PointId, f64)> = None;
-            // Ranges that could still beat the best |Δr|, as squares with a little slack so
-            // the exact test below decides every close call: most candidates are dropped
-            // here without a square root.
-            let (mut lo_sq, mut hi_sq) = (-1.0, f64::INFINITY);
+            // Squared ranges that could still beat the best |Δr|, as a band's middle and
+            // half-width with a little slack so the exact test below decides every close
+            // call: most candidates are dropped by the band without a square root.
+            let (mut band_mid, mut band_half) = (0.0, f64::INFINITY);
             for n in &search.found {
                 let d2 = dist_sq(&n.point, p);
                 let e = n.point - o;
                 let re_sq = e.norm_squared();
-                // One branch, rarely taken, for the three tests (`&`, not `&&`): most
-                // candidates fail one of them, in no order a branch predictor could learn.
-                if !((d2 <= reach_sq) & (re_sq > lo_sq) & (re_sq < hi_sq)) {
+                // One branch, rarely taken, for both tests, each a number at most 0 where it
+                // passes (a difference of finite floats is 0 only where they are equal, so
+                // the reach test is exact). Most candidates fail one of them, in no order a
+                // branch predictor could learn: a branch per test (the compiler makes one
+                // even of `&`) cost q-idc's whole Intel run 9 % in mispredictions.
+                let outside_reach = d2 - reach_sq;
+                let outside_band = (re_sq - band_mid).abs() - band_half;
+                // Written out: `f64::max`'s care for NaN, which neither can be, costs a blend.
+                let outside = if outside_reach > outside_band {
+                    outside_reach
+                } else {
+                    outside_band
+                };
+                if outside > 0.0 {
                     continue;
                 }
                 let re = re_sq.sqrt();
@@ -320,12 +331,13 @@ impl CorrespondenceMetric for MatchingRange {
                 if best.is_none_or(|b| dr < b.0 || (dr == b.0 && n.id < b.1)) {
                     best = Some((dr, n.id, d2));
                     // |re − r| < dr ⇔ (r − dr)² < re² < (r + dr)² for re ≥ 0.
-                    lo_sq = if dr < r {
+                    let lo_sq = if dr < r {
                         (r - dr) * (r - dr) * (1.0 - 1e-9)
                     } else {
                         -1.0
                     };
-                    hi_sq = (r + dr) * (r + dr) * (1.0 + 1e-9);
+                    let hi_sq = (r + dr) * (r + dr) * (1.0 + 1e-9);
+                    (band_mid, band_half) = (0.5 * (lo_sq + hi_sq), 0.5 * (hi_sq - lo_sq));
                 }
             }
             if let Some((_, id, d2)) = best {
