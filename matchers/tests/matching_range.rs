@@ -174,6 +174,32 @@ fn a_new_reference_drops_the_cache() {
     assert_eq!(pairs[0].reference, 1);
 }
 
+/// A sensor pose that is not finite pairs no point, whatever the reference holds: the rule's
+/// one-branch filter must treat a NaN range as failing, as the separate tests did.
+#[test]
+fn a_pose_that_is_not_finite_pairs_nothing() {
+    let mut rule = MatchingRange::new(10f64.to_radians());
+    let local = vec![Point2::new(3.0, 0.0), Point2::new(0.0, 3.0)];
+    let mut reference = QuadTree::default();
+    reference.insert(Point2::new(3.1, 0.0)).unwrap();
+    reference.insert(Point2::new(0.0, 3.1)).unwrap();
+    let mut pairs = Vec::new();
+    for pose in [
+        Pose2::new(f64::NAN, 0.0, 0.0),
+        Pose2::new(0.0, f64::INFINITY, 0.0),
+    ] {
+        let query = Query {
+            local: &local,
+            points: &local,
+            pose,
+            max_dist: 1.0,
+        };
+        rule.begin_scan(&local);
+        rule.pair(&reference, &query, &mut pairs);
+        assert!(pairs.is_empty(), "{pose:?} paired {pairs:?}");
+    }
+}
+
 /// Logged ranges are quantized, so several reference points can differ from a scan point's
 /// range by exactly the same amount. The rule then takes the lowest id whatever order the index
 /// finds them in, so the quad tree, the kd-tree and brute force pair alike.
