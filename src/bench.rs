@@ -44,9 +44,9 @@ pub fn run(c: BenchCommand) -> Result<()> {
         BenchCommand::Index(a) => {
             let report = index_bench(&a)?;
             if a.json {
-                println!("{}", serde_json::to_string(&report)?);
+                qicp_core::say!("{}", serde_json::to_string(&report)?)?;
             } else {
-                print!("{}", report.table());
+                qicp_core::output::write_stdout(&report.table())?;
             }
             Ok(())
         }

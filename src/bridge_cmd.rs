@@ -132,7 +132,7 @@ where
 
 /// Prints a publisher's report on stdout.
 pub fn print_publish_report(report: &PublishReport) -> Result<()> {
-    println!("{}", serde_json::to_string_pretty(report)?);
+    qicp_core::say!("{}", serde_json::to_string_pretty(report)?)?;
     Ok(())
 }
 

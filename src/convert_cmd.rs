@@ -61,7 +61,7 @@ pub fn run(args: ConvertArgs) -> Result<()> {
         return Err(reader.empty(&args.log).into());
     }
     bag.commit()?;
-    eprintln!(
+    qicp_core::note!(
         "wrote {} records of {} to {}",
         reader.records(),
         args.log.display(),

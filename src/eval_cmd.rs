@@ -66,9 +66,9 @@ pub fn run(c: EvalCommand) -> Result<()> {
             // The JSON stands whatever it holds (a script reads `n`); a table of nothing
             // scored would only print NaNs above the error.
             if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
+                qicp_core::say!("{}", serde_json::to_string_pretty(&r)?)?;
             } else if r.n > 0 {
-                println!("{}", relations_table(&r));
+                qicp_core::say!("{}", relations_table(&r))?;
             }
             if r.n == 0 {
                 anyhow::bail!(
@@ -92,9 +92,9 @@ pub fn run(c: EvalCommand) -> Result<()> {
                 format!("comparing {} with {}", a.est.display(), a.truth.display())
             })?;
             if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
+                qicp_core::say!("{}", serde_json::to_string_pretty(&r)?)?;
             } else {
-                println!("{}", ate_table(&r));
+                qicp_core::say!("{}", ate_table(&r))?;
             }
         }
     }

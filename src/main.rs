@@ -4,6 +4,8 @@ use qicp::{bench, bridge_cmd, convert_cmd, eval_cmd, experiment, match_cmd, sim_
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use qicp_core::output::StdoutError;
+use std::process::ExitCode;
 
 /// 2D laser scan matching boosted by quad trees (Slamet, Visser, Pfingsthorn).
 #[derive(Debug, Parser)]
@@ -41,15 +43,27 @@ enum Command {
     Sweep(sweep_cmd::SweepArgs),
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        // stdout's reader went away (`qicp sweep … --json | head -1`): it has what it
+        // wanted, and the command ends quietly, as ripgrep does.
+        Err(e) if reader_went_away(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            qicp_core::note!("Error: {e:?}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Bench(c) => bench::run(c),
         Command::Convert(a) => convert_cmd::run(a),
         Command::Eval(c) => eval_cmd::run(c),
         Command::Match(a) => match_cmd::run(a),
         Command::Matchers => {
-            print!("{}", match_cmd::listing(qicp::registry())?);
+            qicp_core::output::write_stdout(&match_cmd::listing(qicp::registry())?)?;
             Ok(())
         }
         Command::Replay(a) => bridge_cmd::run_replay(a),
@@ -57,6 +71,13 @@ fn main() -> Result<()> {
         Command::Sim(a) => sim_cmd::run(a),
         Command::Sweep(a) => sweep_cmd::run(a),
     }
+}
+
+/// Whether `e` is a result written to a stdout whose reader has closed it (and not, say, a
+/// bridge socket whose peer went away, which is an error).
+fn reader_went_away(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<StdoutError>()
+        .is_some_and(StdoutError::reader_went_away)
 }
 
 #[cfg(test)]

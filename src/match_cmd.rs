@@ -242,7 +242,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
 
     let totals = matcher.summary();
     if let Some(warning) = totals.fallback_warning() {
-        eprintln!("warning: {warning}");
+        qicp_core::note!("warning: {warning}");
     }
     let mut summary = serde_json::to_value(&totals)?;
     summary["skipped_lines"] = reader.skipped_lines().into();
@@ -269,9 +269,9 @@ pub fn run(args: MatchArgs) -> Result<()> {
     }
     writer.commit(&config, Some(&text))?;
     if args.json {
-        println!("{text}");
+        qicp_core::say!("{text}")?;
     } else {
-        eprintln!("{text}");
+        qicp_core::note!("{text}");
     }
     if let Some(why) = unscored {
         bail!(why);

@@ -125,7 +125,7 @@ pub fn run(a: SimArgs) -> Result<()> {
         writeln!(w)
     })?;
     made.keep();
-    println!("{}", serde_json::to_string_pretty(&summary)?);
+    qicp_core::say!("{}", serde_json::to_string_pretty(&summary)?)?;
     Ok(())
 }
 

@@ -85,7 +85,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         .jobs
         .or_else(|| std::thread::available_parallelism().ok())
         .map_or(1, NonZeroUsize::get);
-    eprintln!(
+    qicp_core::note!(
         "sweeping {} on {} scans: default + {} variants, {jobs} at a time{}",
         config.kind(),
         input.scans,
@@ -102,19 +102,19 @@ pub fn run(args: SweepArgs) -> Result<()> {
         &variants,
         jobs,
         |name, result, elapsed| match result {
-            Ok(f) => eprintln!(
+            Ok(f) => qicp_core::note!(
                 "variant {name} done in {:.1} s (trans_mean {:.4} m)",
                 elapsed.as_secs_f64(),
                 f.trans_mean
             ),
-            Err(e) => eprintln!("variant {name} failed: {e}"),
+            Err(e) => qicp_core::note!("variant {name} failed: {e}"),
         },
     )?;
     let report = report(&input, &config, default, reports);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        qicp_core::say!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        print!("{}", table(&report));
+        qicp_core::output::write_stdout(&table(&report))?;
     }
     Ok(())
 }

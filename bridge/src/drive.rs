@@ -289,7 +289,7 @@ fn connect(beams: usize, options: &DriveOptions) -> Result<ScanPublisher, DriveE
     })?;
     let want = options.subscribers_wanted();
     if want > 0 {
-        eprintln!("waiting for {want} subscriber(s) on {}", topics.scan());
+        qicp_core::note!("waiting for {want} subscriber(s) on {}", topics.scan());
         if !publisher.wait_for_subscribers(want, secs(options.connect_timeout))? {
             if publisher.interrupted() {
                 return Err(DriveError::Interrupted);

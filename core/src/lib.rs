@@ -18,6 +18,7 @@ pub mod index;
 pub mod kdtree;
 pub mod matcher;
 pub mod metric;
+pub mod output;
 pub mod pose;
 pub mod quadtree;
 pub mod record;

@@ -178,9 +178,13 @@ fn run_matchers(
                     if show_progress {
                         match &result {
                             Ok(o) => {
-                                eprintln!("{kind}: {} scans in {:.1} s", o.summary.scans, o.seconds)
+                                qicp_core::note!(
+                                    "{kind}: {} scans in {:.1} s",
+                                    o.summary.scans,
+                                    o.seconds
+                                )
                             }
-                            Err(e) => eprintln!("{kind}: failed: {e:#}"),
+                            Err(e) => qicp_core::note!("{kind}: failed: {e:#}"),
                         }
                     }
                     if let Ok(mut slot) = slots[i].lock() {
@@ -232,10 +236,10 @@ pub fn run(args: &RunArgs, registry: &Registry) -> Result<()> {
     }
     let summary = run_once(args, registry, &config, &out, true, started)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        qicp_core::say!("{}", serde_json::to_string_pretty(&summary)?)?;
     } else if !args.quiet {
-        println!("{}", table(&summary, &config.run.matchers));
-        println!("outputs in {}", out.display());
+        qicp_core::say!("{}", table(&summary, &config.run.matchers))?;
+        qicp_core::say!("outputs in {}", out.display())?;
     }
     Ok(())
 }

@@ -226,7 +226,7 @@ impl Scores {
                 let report = evaluate_ate(traj, truth, &opts)?;
                 if 2 * report.n < traj.len() {
                     // A ground truth of a few poses scores a few poses: 0 m from one pair.
-                    eprintln!(
+                    qicp_core::note!(
                         "warning: only {} of the trajectory's {} poses have a ground-truth pose \
                          within {} s: the ATE covers those alone",
                         report.n,

@@ -56,7 +56,7 @@ pub(super) fn run_worlds(
     let mut summaries = Vec::with_capacity(n);
     for (k, &seed) in seeds.iter().enumerate() {
         if !args.quiet {
-            eprintln!("world {}/{n} (seed {seed})", k + 1);
+            qicp_core::note!("world {}/{n} (seed {seed})", k + 1);
         }
         let mut c = config.clone();
         c.source.world_seed = Some(seed);
@@ -86,10 +86,10 @@ pub(super) fn run_worlds(
     let path = out.join("worlds.json");
     write_atomic(&path, format!("{text}\n").as_bytes())?;
     if args.json {
-        println!("{text}");
+        qicp_core::say!("{text}")?;
     } else if !args.quiet {
-        println!("{}", worlds_table(&report, &config.run.matchers));
-        println!("outputs in {}", out.display());
+        qicp_core::say!("{}", worlds_table(&report, &config.run.matchers))?;
+        qicp_core::say!("outputs in {}", out.display())?;
     }
     Ok(())
 }

@@ -96,30 +96,38 @@ pub fn run_bench(args: &BridgeBenchArgs) -> Result<()> {
         let report =
             payload_bench::payload_bench(&args.sizes, args.messages, args.burst, args.wait)?;
         if args.json {
-            println!("{}", serde_json::to_string(&report)?);
+            qicp_core::say!("{}", serde_json::to_string(&report)?)?;
         } else {
-            payload_bench::print_table(&report);
+            payload_bench::print_table(&report)?;
         }
         return Ok(());
     }
     let report = bridge_bench(args)?;
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        qicp_core::say!("{}", serde_json::to_string(&report)?)?;
     } else {
-        println!(
+        qicp_core::say!(
             "{:<10} {:>10} {:>10} {:>14}",
-            "transport", "p50 µs", "p99 µs", "msgs/s"
-        );
+            "transport",
+            "p50 µs",
+            "p99 µs",
+            "msgs/s"
+        )?;
         for (name, f) in [("iceoryx2", report.iceoryx2), ("uds", report.uds)] {
-            println!(
+            qicp_core::say!(
                 "{name:<10} {:>10.2} {:>10.2} {:>14.0}",
-                f.p50_us, f.p99_us, f.msgs_per_s
-            );
+                f.p50_us,
+                f.p99_us,
+                f.msgs_per_s
+            )?;
         }
-        println!(
+        qicp_core::say!(
             "{} beams, {} bytes per message, readers {:?}; p50 ratio iceoryx2/uds = {:.2}",
-            report.beams, report.bytes, report.wait, report.p50_ratio
-        );
+            report.beams,
+            report.bytes,
+            report.wait,
+            report.p50_ratio
+        )?;
     }
     Ok(())
 }

@@ -276,10 +276,10 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
         load: [load_start, load_average()],
     };
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        qicp_core::say!("{}", serde_json::to_string(&report)?)?;
     } else {
         let cpu = |a: &ArmTimes| a.cpu_s.map_or("?".to_string(), |c| format!("{c:.3}"));
-        println!(
+        qicp_core::say!(
             "{} scans, {}: in-process {:.3} s, two processes {:.3} s (median of {}), ratio {:.3}; \
              CPU per run {} s against {} s; load {:.2}{}",
             report.scans,
@@ -296,7 +296,7 @@ pub fn run_park_bench(args: &ParkBenchArgs) -> Result<()> {
             } else {
                 "; TRAJECTORIES DIFFER"
             }
-        );
+        )?;
     }
     anyhow::ensure!(report.identical, "the two-process trajectory differs");
     Ok(())

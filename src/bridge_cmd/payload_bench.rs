@@ -162,35 +162,45 @@ pub fn payload_bench(
 }
 
 /// Prints the report as a table.
-pub fn print_table(report: &PayloadBenchReport) {
-    println!(
+///
+/// # Errors
+/// When stdout cannot be written.
+pub fn print_table(report: &PayloadBenchReport) -> Result<(), qicp_core::output::StdoutError> {
+    qicp_core::say!(
         "{:>9} {:<9} {:>10} {:>10} {:>12} {:>11}",
-        "bytes", "transport", "p50 µs", "p99 µs", "msgs/s", "CPU µs/msg"
-    );
+        "bytes",
+        "transport",
+        "p50 µs",
+        "p99 µs",
+        "msgs/s",
+        "CPU µs/msg"
+    )?;
     let cpu = |c: Option<f64>| c.map_or("?".to_string(), |c| format!("{c:.2}"));
     for s in &report.sizes {
         for (name, f) in [("iceoryx2", s.iceoryx2), ("uds", s.uds)] {
-            println!(
+            qicp_core::say!(
                 "{:>9} {name:<9} {:>10.2} {:>10.2} {:>12.0} {:>11}",
                 s.bytes,
                 f.p50_us,
                 f.p99_us,
                 f.msgs_per_s,
                 cpu(f.cpu_us_per_msg)
-            );
+            )?;
         }
-        println!(
+        qicp_core::say!(
             "{:>9} iceoryx2/uds: p50 {:.3}, CPU {}; writing + reading the payload alone {} µs",
             "",
             s.p50_ratio,
             s.cpu_ratio.map_or("?".to_string(), |r| format!("{r:.3}")),
             cpu(s.fill_and_read_cpu_us)
-        );
+        )?;
     }
-    println!(
+    qicp_core::say!(
         "readers {:?}; load {:.2} → {:.2}",
-        report.wait, report.load[0][0], report.load[1][0]
-    );
+        report.wait,
+        report.load[0][0],
+        report.load[1][0]
+    )
 }
 
 /// The payload's byte `i` in message `seq`: what the sender writes and the reader checks.

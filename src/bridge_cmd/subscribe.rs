@@ -110,7 +110,7 @@ pub fn run_subscribe(
     let mut rejected = 0u64;
     let mut publish_error = None;
     let mut write_error = None;
-    eprintln!(
+    qicp_core::note!(
         "matching scans from {} ({} mode) with {}",
         topics.scan(),
         backpressure.name(),
@@ -145,19 +145,21 @@ pub fn run_subscribe(
                 }
                 Err(e) => {
                     rejected += 1;
-                    eprintln!("warning: scan {} rejected: {e}", view.header.seq);
+                    qicp_core::note!("warning: scan {} rejected: {e}", view.header.seq);
                 }
             },
             StreamEvent::PublisherJoined { skipped } if skipped > 0 => {
-                eprintln!("publisher joined; {skipped} scans were sent before this subscriber")
+                qicp_core::note!(
+                    "publisher joined; {skipped} scans were sent before this subscriber"
+                )
             }
-            StreamEvent::PublisherJoined { .. } => eprintln!("publisher joined"),
-            StreamEvent::PublisherLost => eprintln!(
+            StreamEvent::PublisherJoined { .. } => qicp_core::note!("publisher joined"),
+            StreamEvent::PublisherLost => qicp_core::note!(
                 "publisher lost without end-of-stream; waiting {} s for a new one",
                 args.reconnect_timeout
             ),
-            StreamEvent::Gap { missing } => eprintln!("gap: {missing} scans lost"),
-            StreamEvent::Intruder => eprintln!(
+            StreamEvent::Gap { missing } => qicp_core::note!("gap: {missing} scans lost"),
+            StreamEvent::Intruder => qicp_core::note!(
                 "error: a second publisher sends on {} while the first is connected; its scans \
                  are ignored and the run will fail",
                 topics.scan()
@@ -187,7 +189,7 @@ pub fn run_subscribe(
     };
     let totals = matching.summary();
     if let Some(warning) = totals.fallback_warning() {
-        eprintln!("warning: {warning}");
+        qicp_core::note!("warning: {warning}");
     }
     let mut summary = serde_json::to_value(&totals)?;
     summary["bridge"] = serde_json::to_value(&bridge)?;
@@ -196,9 +198,9 @@ pub fn run_subscribe(
         writer.commit(config, Some(&text))?;
     }
     if json {
-        println!("{text}");
+        qicp_core::say!("{text}")?;
     } else {
-        eprintln!("{text}");
+        qicp_core::note!("{text}");
     }
     // Give pose subscribers a moment to read the tail before this process's memory goes.
     poses.linger(Duration::from_secs(5))?;

@@ -291,14 +291,14 @@ impl LogInfo {
     /// out of time order kept in file order and on records of types qicp does not read.
     pub fn warn(&self, path: &Path) {
         if self.skipped_lines > 0 {
-            eprintln!(
+            qicp_core::note!(
                 "warning: skipped {} malformed lines of {} (--lenient)",
                 self.skipped_lines,
                 path.display()
             );
         }
         if self.out_of_order > 0 && self.order == RecordOrder::File {
-            eprintln!(
+            qicp_core::note!(
                 "note: {} laser lines of {} are stamped earlier than the line before them; they \
                  are matched in file order, the order the laser took them (--order time sorts \
                  them)",
@@ -307,7 +307,7 @@ impl LogInfo {
             );
         }
         if self.late > 0 {
-            eprintln!(
+            qicp_core::note!(
                 "warning: dropped {} laser lines of {} that came more than {} s out of time order",
                 self.late,
                 path.display(),
@@ -317,7 +317,7 @@ impl LogInfo {
         if !self.unknown_types.is_empty() {
             // Other CARMEN records (SYNC, NMEAGGA, RAWLASER1…) carry nothing qicp reads; a
             // misspelt or damaged tag lands here too, so none is dropped unseen.
-            eprintln!(
+            qicp_core::note!(
                 "note: ignored records of {} of types qicp does not read: {}",
                 path.display(),
                 self.unknown_list()

@@ -111,14 +111,14 @@ impl BagInfo {
     /// Warnings a command prints on stderr.
     pub fn warn(&self, path: &Path) {
         if self.without_odometry > 0 {
-            eprintln!(
+            qicp_core::note!(
                 "warning: dropped {} scans of {} that no odometry surrounds in time",
                 self.without_odometry,
                 path.display()
             );
         }
         if self.odometry_out_of_order > 0 {
-            eprintln!(
+            qicp_core::note!(
                 "warning: dropped {} odometry samples of {} older than the one before",
                 self.odometry_out_of_order,
                 path.display()

@@ -1,0 +1,52 @@
+//! A reader that goes away ends nothing badly: results written to a stdout whose reader has
+//! closed it end the command quietly (exit 0, as ripgrep does), and progress written to a
+//! closed stderr is dropped while the work goes on. Reads `../shared/data/intel/` (never
+//! copied).
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+
+fn data(name: &str) -> String {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/intel"))
+        .join(name)
+        .display()
+        .to_string()
+}
+
+/// `qicp matchers | true`: the reader is gone before qicp writes its listing.
+#[test]
+fn a_closed_stdout_ends_the_command_quietly() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .arg("matchers")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("runs qicp");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("waits for qicp");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{:?}: {stderr}", out.status);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// `qicp sweep … 2>&1 | head -1` with the JSON kept: the progress lines' reader is gone from
+/// the start, and the sweep still finishes and reports.
+#[test]
+fn a_sweep_whose_progress_reader_went_away_still_reports() {
+    let (log, relations) = (data("intel.clf.bz2"), data("intel.relations"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(["sweep", &log, "--matcher", "q-wsm", "--scans", "300"])
+        .args(["--variants", "beams/2", "--relations", &relations, "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("runs qicp");
+    drop(child.stderr.take());
+    let out = child.wait_with_output().expect("waits for qicp");
+    assert!(out.status.success(), "{:?}", out.status);
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    assert_eq!(report["scans"], 300);
+    let variants = report["variants"].as_array().expect("variants");
+    assert_eq!(variants.len(), 1);
+    assert!(variants[0].get("error").is_none(), "{report}");
+}
