@@ -76,8 +76,11 @@ fn run(cli: Cli) -> Result<()> {
 /// Whether `e` is a result written to a stdout whose reader has closed it (and not, say, a
 /// bridge socket whose peer went away, which is an error).
 fn reader_went_away(e: &anyhow::Error) -> bool {
-    e.downcast_ref::<StdoutError>()
-        .is_some_and(StdoutError::reader_went_away)
+    e.chain().any(|cause| {
+        cause
+            .downcast_ref::<StdoutError>()
+            .is_some_and(StdoutError::reader_went_away)
+    })
 }
 
 #[cfg(test)]

@@ -317,7 +317,7 @@ impl CorrespondenceMetric for MatchingRange {
                 } else {
                     outside_band
                 };
-                // A NaN (a pose that is not finite) pairs nothing. (One unordered comparison.)
+                // A NaN (a pose that is not finite) pairs nothing.
                 if outside > 0.0 || outside.is_nan() {
                     continue;
                 }
