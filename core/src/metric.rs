@@ -308,7 +308,7 @@ impl CorrespondenceMetric for MatchingRange {
                 // passes (a difference of finite floats is 0 only where they are equal, so
                 // the reach test is exact). Most candidates fail one of them, in no order a
                 // branch predictor could learn: a branch per test (the compiler makes one
-                // even of `&`) cost q-idc's whole Intel run 6 % in mispredictions.
+                // even of `&`) made q-idc's whole Intel run 6 % slower.
                 let outside_reach = d2 - reach_sq;
                 let outside_band = (re_sq - band_mid).abs() - band_half;
                 // Written out: `f64::max`'s care for NaN, which neither can be, costs a blend.
