@@ -4,7 +4,7 @@
 //! copied).
 
 use std::path::PathBuf;
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
 
 fn data(name: &str) -> String {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/intel"))
@@ -13,15 +13,20 @@ fn data(name: &str) -> String {
         .to_string()
 }
 
-/// `qicp matchers | true`: the reader is gone before qicp writes its listing.
-#[test]
-fn a_closed_stdout_ends_the_command_quietly() {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
-        .arg("matchers")
+/// `qicp ARGS` with both its stdout and its stderr read through pipes.
+fn spawn_piped(args: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_qicp"))
+        .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("runs qicp");
+        .expect("runs qicp")
+}
+
+/// `qicp matchers | true`: the reader is gone before qicp writes its listing.
+#[test]
+fn a_closed_stdout_ends_the_command_quietly() {
+    let mut child = spawn_piped(&["matchers"]);
     drop(child.stdout.take());
     let out = child.wait_with_output().expect("waits for qicp");
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -34,13 +39,19 @@ fn a_closed_stdout_ends_the_command_quietly() {
 #[test]
 fn a_sweep_whose_progress_reader_went_away_still_reports() {
     let (log, relations) = (data("intel.clf.bz2"), data("intel.relations"));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_qicp"))
-        .args(["sweep", &log, "--matcher", "q-wsm", "--scans", "300"])
-        .args(["--variants", "beams/2", "--relations", &relations, "--json"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("runs qicp");
+    let mut child = spawn_piped(&[
+        "sweep",
+        &log,
+        "--matcher",
+        "q-wsm",
+        "--scans",
+        "300",
+        "--variants",
+        "beams/2",
+        "--relations",
+        &relations,
+        "--json",
+    ]);
     drop(child.stderr.take());
     let out = child.wait_with_output().expect("waits for qicp");
     assert!(out.status.success(), "{:?}", out.status);

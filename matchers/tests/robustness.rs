@@ -596,21 +596,36 @@ fn turning(k: usize) -> Pose2 {
     Pose2::new(-1.0 + 0.05 * k as f64, 0.5, 0.2 * k as f64)
 }
 
-/// Runs `config` over 30 scans of the fast turn whose odometry repeats its reading of scan 9
-/// for scans 10 to 13 and then reads the truth again (a stalled reading that catches up, as
-/// the MIT CSAIL log's does three times): the worst heading error (deg) from scan 14 on.
-fn stalled_turn_heading_error(config: MatcherConfig) -> f64 {
+/// Runs `config` over 30 room records, the robot at `truth(k)` and odometry reading
+/// `reading(k)`: the worst error (deg) from scan `from` on of the estimate's turn since scan 0
+/// against the truth's.
+fn worst_heading_error(
+    config: MatcherConfig,
+    truth: impl Fn(usize) -> Pose2,
+    reading: impl Fn(usize) -> Pose2,
+    from: usize,
+) -> f64 {
     let mut odometry = config.build().expect("builds");
+    let mut first = None;
     let mut worst = 0.0f64;
     for k in 0..30 {
-        let read = if (10..14).contains(&k) { 9 } else { k };
-        let e = odometry.process(&room_record_at(&turning(k), k, turning(read)));
-        if k >= 14 {
-            let off = qicp_core::normalize_angle(e.pose.theta - turning(k).theta);
+        let e = odometry.process(&room_record_at(&truth(k), k, reading(k)));
+        let first = *first.get_or_insert(e.pose.theta);
+        if k >= from {
+            let turned = truth(k).theta - truth(0).theta;
+            let off = qicp_core::normalize_angle(e.pose.theta - first - turned);
             worst = worst.max(off.abs().to_degrees());
         }
     }
     worst
+}
+
+/// The fast turn whose odometry repeats its reading of scan 9 for scans 10 to 13 and then
+/// reads the truth again (a stalled reading that catches up, as the MIT CSAIL log's does three
+/// times): the worst heading error (deg) from scan 14 on.
+fn stalled_turn_heading_error(config: MatcherConfig) -> f64 {
+    let read = |k| if (10..14).contains(&k) { 9 } else { k };
+    worst_heading_error(config, turning, |k| turning(read(k)), 14)
 }
 
 #[test]
@@ -648,19 +663,10 @@ fn turning_at(deg: f64, k: usize) -> Pose2 {
     Pose2::new(-1.0 + 0.08 * k as f64, 0.5, (deg * k as f64).to_radians())
 }
 
-/// Runs `config` over 30 scans of a turn at `deg` a scan with no odometry: every record reads
-/// the same pose, as a log without odometry does. The worst heading error (deg).
+/// A turn at `deg` a scan with no odometry: every record reads the same pose, as a log
+/// without odometry does. The worst heading error (deg).
 fn turn_without_odometry(config: MatcherConfig, deg: f64) -> f64 {
-    let mut odometry = config.build().expect("builds");
-    let start = turning_at(deg, 0);
-    let mut worst = 0.0f64;
-    for k in 0..30 {
-        let truth = turning_at(deg, k);
-        let e = odometry.process(&room_record_at(&truth, k, Pose2::IDENTITY));
-        let off = qicp_core::normalize_angle(e.pose.theta - start.between(&truth).theta);
-        worst = worst.max(off.abs().to_degrees());
-    }
-    worst
+    worst_heading_error(config, |k| turning_at(deg, k), |_| Pose2::IDENTITY, 0)
 }
 
 #[test]
