@@ -3,7 +3,7 @@
 use crate::ConfigError;
 use crate::icp::{IcpParams, move_points, residual, trim};
 use crate::lsq::{NormalEquations, apply_step};
-use crate::params::{Param, Range, check_section};
+use crate::params::{Acts, Param, Range, check_section};
 use crate::registry::{Algorithm, Metric};
 use qicp_core::{
     ClosestPoint, CorrespondenceMetric, Fallback, LaserNoise, MatchResult, Matrix2, Matrix3, Pair,
@@ -27,6 +27,14 @@ pub struct WsmParams {
     pub sigma_slide: f64,
     /// Share of the along-surface variance also assigned across the surface. Default 0.01.
     pub normal_fraction: f64,
+    /// Against a map ([`Reference::is_map`]): a pair whose two points both lie on straight
+    /// surfaces ([`PointInfo::linearity`] 1) with normals more than this apart (deg, the scan
+    /// point's turned into the map) is dropped. A map holds both faces of a thin wall, seen
+    /// from either side, and a point of one face pairs with the other within the gate; one
+    /// scan, seen from one place, never holds both. Corners and clutter, whose normals are
+    /// guesses, keep their pairs: at a corridor's door jambs they fix its length. 0: off.
+    /// Default 90 (faces that look opposite ways).
+    pub face_angle_deg: f64,
 }
 
 impl Default for WsmParams {
@@ -35,6 +43,7 @@ impl Default for WsmParams {
             correspondence_scale: 1.0,
             sigma_slide: 0.1,
             normal_fraction: 0.01,
+            face_angle_deg: 90.0,
         }
     }
 }
@@ -62,6 +71,12 @@ impl Algorithm for WsmAlgorithm {
             Range::Closed(0.0, 1.0),
             "share of the along-surface variance also assigned across it",
         ),
+        Param::steering(
+            "face_angle_deg",
+            Range::Closed(0.0, 180.0),
+            "against a map, a pair of two straight surfaces whose normals differ more (deg) is dropped (0: off)",
+        )
+        .acting_on(Acts::Map),
     ];
     type Params = WsmParams;
     type Matcher<C: Metric> = Wsm<C>;
@@ -151,6 +166,30 @@ impl<C: CorrespondenceMetric + Default> Wsm<C> {
 }
 
 impl<C: CorrespondenceMetric> Wsm<C> {
+    /// Drops the pairs that join opposite faces of a thin wall
+    /// ([`WsmParams::face_angle_deg`]); only against a map.
+    fn drop_opposed_faces<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan_info: &[PointInfo],
+        pose: &Pose2,
+    ) {
+        let angle = self.params.face_angle_deg;
+        if angle <= 0.0 || !reference.is_map() {
+            return;
+        }
+        let cos_max = angle.to_radians().cos();
+        let rot = pose.rotation();
+        let info = reference.info();
+        self.pairs.retain(|p| {
+            let a = &info[p.reference as usize];
+            let b = &scan_info[p.scan as usize];
+            // Linearity 1 is a line within twice the range noise: its normal is no guess. A
+            // point with no neighbour has linearity 0 (and a zero normal).
+            a.linearity < 1.0 || b.linearity < 1.0 || a.normal.dot(&(rot * b.normal)) >= cos_max
+        });
+    }
+
     /// Pfister et al. Eq. (8)–(15): the weighted normal equations of the current pairs.
     fn normal_equations<I: SpatialIndex>(
         &self,
@@ -227,6 +266,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
                 self.icp.max_dist_end,
                 &mut self.scratch,
             );
+            self.drop_opposed_faces(reference, &scan_info, &pose);
             if self.pairs.len() < self.icp.min_correspondences {
                 if it == 0 {
                     return MatchResult::fallback(
@@ -261,6 +301,7 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
             max_dist: self.icp.max_dist_end,
         };
         self.metric.pair(reference.index(), &query, &mut self.pairs);
+        self.drop_opposed_faces(reference, &scan_info, &pose);
         if self.pairs.len() < self.icp.min_correspondences {
             // The estimate lost its support on the way (pairs fell out of the shrinking
             // gate): it and its near-singular covariance would be noise.
