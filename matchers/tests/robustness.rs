@@ -65,7 +65,8 @@ fn error(estimate: &Pose2, k: usize) -> (f64, f64) {
 }
 
 /// `kind`'s defaults with the checks on or off (`checked`) and, for WSM, its face gate on or
-/// off (`faces`, `[matcher.wsm] face_angle_deg`). Both off is the paper's plain Alg. 1.
+/// off (`faces`, `[matcher.wsm] face_angle_deg`). Both off is the unchecked form that a 20°
+/// start breaks.
 fn config(kind: MatcherKind, checked: bool, faces: bool) -> MatcherConfig {
     let defaults = MatcherConfig::defaults(kind);
     let mut c = if faces || defaults.algorithm() != "wsm" {
