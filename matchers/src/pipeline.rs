@@ -637,6 +637,20 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         {
             return false;
         }
+        // The re-anchored match passes the check every match passes, as a search's recovery
+        // must: one that holds far fewer pairs than recent matches, or leaves a larger
+        // residual, fits the old map on a part of the scan only, where a stretch of it looks
+        // alike (aliasing).
+        let fit = Fit {
+            share: self
+                .validator
+                .inlier_share(&self.reference, local, &again.pose),
+            residual: again.residual,
+            pairs: again.correspondences as f64,
+        };
+        if is_poor(fit, self.validator.threshold()) {
+            return false;
+        }
         if !self.revisit.corroborated(&result.pose, &again.pose) {
             return false;
         }
