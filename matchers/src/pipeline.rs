@@ -570,13 +570,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         }
         let local = scan.points();
         let level = self.validator.threshold();
-        let fit_of = |validator: &Validator, reference: &Reference<I>, r: &MatchResult| Fit {
-            share: validator.inlier_share(reference, local, &r.pose),
-            residual: r.residual,
-            pairs: r.correspondences as f64,
-        };
         let mut fit = match result.fallback {
-            None => fit_of(&self.validator, &self.reference, &result),
+            None => self.fit(local, &result),
             // Nothing within the gate: odometry may be far off, or the scan sees new ground.
             Some(Fallback::TooFewCorrespondences { found }) => Fit {
                 share: 0.0,
@@ -593,7 +588,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     .matcher
                     .match_with_prior(&self.reference, scan, start.pose, prior);
                 if again.fallback.is_none() {
-                    let f = fit_of(&self.validator, &self.reference, &again);
+                    let f = self.fit(local, &again);
                     // Only a match that passes the check replaces the first: one poor
                     // match is not traded for another (an aliased corridor, a lone scan).
                     if f.share > fit.share && !is_poor(f, level) {
@@ -620,6 +615,16 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         (result, check, passed)
     }
 
+    /// What the check weighs of a match of the scan `local`: the share of it the reference
+    /// explains, the residual and the pairs.
+    fn fit(&self, local: &[Point2<f64>], r: &MatchResult) -> Fit {
+        Fit {
+            share: self.validator.inlier_share(&self.reference, local, &r.pose),
+            residual: r.residual,
+            pairs: r.correspondences as f64,
+        }
+    }
+
     /// Looks the matched scan up in the old map ([`crate::revisit`]) and re-anchors the match
     /// there when the old map explains it much better nearby: true when it did.
     fn reanchor(&mut self, scan: &qicp_core::Scan, result: &mut MatchResult) -> bool {
@@ -641,14 +646,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         // must: one that holds far fewer pairs than recent matches, or leaves a larger
         // residual, fits the old map on a part of the scan only, where a stretch of it looks
         // alike (aliasing).
-        let fit = Fit {
-            share: self
-                .validator
-                .inlier_share(&self.reference, local, &again.pose),
-            residual: again.residual,
-            pairs: again.correspondences as f64,
-        };
-        if is_poor(fit, self.validator.threshold()) {
+        if is_poor(self.fit(local, &again), self.validator.threshold()) {
             return false;
         }
         if !self.revisit.corroborated(&result.pose, &again.pose) {
