@@ -3,15 +3,10 @@
 //! closed stderr is dropped while the work goes on. Reads `../shared/data/intel/` (never
 //! copied).
 
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+mod intel_data;
 
-fn data(name: &str) -> String {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/intel"))
-        .join(name)
-        .display()
-        .to_string()
-}
+use intel_data::data;
+use std::process::{Child, Command, Stdio};
 
 /// `qicp ARGS` with both its stdout and its stderr read through pipes.
 fn spawn_piped(args: &[&str]) -> Child {

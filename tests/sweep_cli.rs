@@ -4,15 +4,10 @@
 //! relations file before any matching; without relations it scores every variant against the
 //! default run. Reads `../shared/data/intel/` (never copied).
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod intel_data;
 
-fn data(name: &str) -> String {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/intel"))
-        .join(name)
-        .display()
-        .to_string()
-}
+use intel_data::data;
+use std::process::{Command, Output};
 
 fn qicp(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_qicp"))
