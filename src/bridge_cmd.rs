@@ -144,6 +144,9 @@ pub struct ReplayArgs {
     /// Skip and count malformed log lines instead of failing.
     #[arg(long)]
     pub lenient: bool,
+    /// The log's laser.
+    #[command(flatten)]
+    pub laser: crate::match_cmd::LaserArgs,
     /// Publisher flags (`--publish` is required: replay has no other output).
     #[command(flatten)]
     pub bridge: PublishArgs,
@@ -160,10 +163,10 @@ pub fn run_replay(args: ReplayArgs) -> Result<()> {
         args.bridge.iceoryx2_config.as_deref(),
     )?;
     // Scan by scan: the log is read as it is published, never held whole.
-    let options = CarmenOptions {
+    let options = args.laser.apply(CarmenOptions {
         lenient: args.lenient,
         ..CarmenOptions::default()
-    };
+    });
     let mut reader = CarmenReader::open(&args.log, &options)?;
     let Some(first) = reader.next().transpose()? else {
         return Err(LogError::empty(&args.log, &reader.info).into());

@@ -26,13 +26,16 @@ pub struct ConvertArgs {
     /// Convert at most this many records (all by default).
     #[arg(long)]
     pub max_records: Option<usize>,
+    /// The log's laser.
+    #[command(flatten)]
+    pub laser: crate::match_cmd::LaserArgs,
 }
 
 /// Runs the command.
 pub fn run(args: ConvertArgs) -> Result<()> {
     crate::matching::remove_on_signal()?;
     let options = LogOptions {
-        carmen: CarmenOptions {
+        carmen: args.laser.apply(CarmenOptions {
             lenient: args.lenient,
             max_beams: args.max_beams,
             // A bag's messages go in time order, and a bag's odometry is interpolated at
@@ -40,7 +43,7 @@ pub fn run(args: ConvertArgs) -> Result<()> {
             // against its file order (Intel's) is sorted by time here.
             order: RecordOrder::Time,
             ..CarmenOptions::default()
-        },
+        }),
         ..LogOptions::default()
     };
     refuse_to_overwrite(&args.log, &[&args.out])?;

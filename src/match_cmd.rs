@@ -48,6 +48,9 @@ pub struct MatchArgs {
     /// Where a ROS 2 bag's scans and odometry are.
     #[command(flatten)]
     pub bag: BagArgs,
+    /// A CARMEN log's laser.
+    #[command(flatten)]
+    pub laser: LaserArgs,
     /// Also write a ROS 2 bag (MCAP): the scans, the odometry and the estimated poses
     /// (`nav_msgs/msg/Odometry` on /qicp/odom and the /tf transform map -> odom), to play in
     /// Foxglove or RViz beside the input.
@@ -56,6 +59,73 @@ pub struct MatchArgs {
     /// Take the scans from the iceoryx2 bridge instead of a log.
     #[command(flatten)]
     pub bridge: crate::bridge_cmd::SubscribeArgs,
+}
+
+/// A CARMEN log's laser, where its lines and `PARAM`s do not say it right: an option given
+/// here wins over the log (ROS 2 bags carry their own in every scan message).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct LaserArgs {
+    /// Field of view of `FLASER` scans (degrees, in (0, 360]). Default: the log's
+    /// `PARAM laser_front_laser_fov`, else 180.
+    #[arg(long, value_name = "DEG", value_parser = fov_deg)]
+    pub fov_deg: Option<f64>,
+    /// Readings at or beyond this are no-returns (m). Default: `PARAM robot_front_laser_max`
+    /// for `FLASER` lines, else 81 (SICK LMS no-returns read 81.83-81.91 m); a `ROBOTLASER1`
+    /// line's own `max_range` field.
+    #[arg(long, value_name = "M", value_parser = positive_range)]
+    pub max_range: Option<f64>,
+    /// Readings below this are discarded (m). Default 0.
+    #[arg(long, value_name = "M", value_parser = non_negative_range)]
+    pub min_range: Option<f64>,
+}
+
+/// `--fov-deg`: a number in (0, 360].
+fn fov_deg(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v > 0.0 && v <= 360.0 {
+        Ok(v)
+    } else {
+        Err("must lie in (0, 360]".into())
+    }
+}
+
+/// `--max-range`: a finite number above 0.
+fn positive_range(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err("must be finite and positive".into())
+    }
+}
+
+/// `--min-range`: a finite number of at least 0.
+fn non_negative_range(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err("must be finite and non-negative".into())
+    }
+}
+
+impl LaserArgs {
+    /// `carmen` with these options set.
+    #[must_use]
+    pub fn apply(&self, carmen: CarmenOptions) -> CarmenOptions {
+        CarmenOptions {
+            flaser_fov_deg: self.fov_deg.or(carmen.flaser_fov_deg),
+            max_range: self.max_range.or(carmen.max_range),
+            min_range: self.min_range.unwrap_or(carmen.min_range),
+            ..carmen
+        }
+    }
+
+    /// Whether any option is given.
+    #[must_use]
+    pub fn any(&self) -> bool {
+        self.fov_deg.is_some() || self.max_range.is_some() || self.min_range.is_some()
+    }
 }
 
 /// The order of a CARMEN log's records ([`RecordOrder`]), as `--order` gives it:
@@ -163,6 +233,11 @@ const RELATIONS_MAX_DT: f64 = 0.1;
 
 /// Runs the command.
 pub fn run(args: MatchArgs) -> Result<()> {
+    if args.bridge.subscribe && args.laser.any() {
+        bail!(
+            "--fov-deg, --max-range and --min-range describe a log's laser: not with --subscribe"
+        );
+    }
     let config = load_config(args.config.as_ref(), args.matcher.as_deref())?;
     if args.bridge.subscribe {
         return crate::bridge_cmd::run_subscribe(
@@ -186,12 +261,12 @@ pub fn run(args: MatchArgs) -> Result<()> {
         .as_ref()
         .map(|r| RelationProbe::new(r, RELATIONS_MAX_DT))
         .transpose()?;
-    let options = args.bag.log_options(CarmenOptions {
+    let options = args.bag.log_options(args.laser.apply(CarmenOptions {
         lenient: args.lenient,
         max_beams: args.max_beams,
         order: args.order.into(),
         ..CarmenOptions::default()
-    });
+    }));
     let outputs: Vec<_> = RunWriter::FILES.iter().map(|f| out.join(f)).collect();
     let mut outputs: Vec<&Path> = outputs.iter().map(PathBuf::as_path).collect();
     outputs.extend(args.out_mcap.as_deref());

@@ -48,6 +48,9 @@ pub struct SweepArgs {
     /// them), or sorted by timestamp.
     #[arg(long, value_enum, default_value_t = crate::match_cmd::LogOrder::File)]
     pub order: crate::match_cmd::LogOrder,
+    /// A CARMEN log's laser.
+    #[command(flatten)]
+    pub laser: crate::match_cmd::LaserArgs,
     /// Also write each run's trajectory to DIR/<run>.tum (e.g. default.tum, scans-2.tum), to
     /// see where a variant goes wrong (`qicp eval relations DIR/scans-2.tum RELATIONS --max-dt
     /// 1e-6` scores it as the sweep does, on the records it matched, where the relations' times
@@ -66,11 +69,11 @@ pub fn run(args: SweepArgs) -> Result<()> {
         Some(names) => select_variants(all, names)?,
         None => all,
     };
-    let carmen = crate::logs::carmen::CarmenOptions {
+    let carmen = args.laser.apply(crate::logs::carmen::CarmenOptions {
         lenient: args.lenient,
         order: args.order.into(),
         ..crate::logs::carmen::CarmenOptions::default()
-    };
+    });
     let mut input = match (&args.relations, &args.reference) {
         (Some(relations), _) => SweepInput::load_with(&args.log, relations, args.scans, carmen)?,
         (None, Some(reference)) => {

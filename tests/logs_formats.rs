@@ -169,6 +169,44 @@ fn defaults_without_params_and_any_beam_count() {
     }
 }
 
+/// 40 `FLASER` scans of 180 beams under `PARAM robot_front_laser_max 30`, their ranges
+/// spread over 1-28 m, with every fifth beam reading `code` where one is given.
+fn coded_log(code: Option<f64>) -> String {
+    let mut text = String::from("PARAM robot_front_laser_max 30 nohost 0\n");
+    for scan in 0..40 {
+        let ranges: Vec<f64> = (0..180)
+            .map(|i| match code {
+                Some(c) if i % 5 == 0 => c,
+                _ => 1.0 + ((i * 7 + scan * 3) % 2700) as f64 / 100.0,
+            })
+            .collect();
+        text += &flaser(&ranges, (0.0, 0.0, 0.0), f64::from(scan));
+        text += "\n";
+    }
+    text
+}
+
+#[test]
+fn a_no_return_code_below_the_declared_max_range_is_found() {
+    let log = read_str(&coded_log(Some(29.5)), &CarmenOptions::default()).unwrap();
+    let (range, count, per_cm) = log.info.ranges.no_return_code().expect("found");
+    assert!(
+        close(range, 29.5) && count == 40 * 36 && per_cm == 0.0,
+        "{range} {count} {per_cm}"
+    );
+    // The maximum range the warning names drops the code, and nothing stands out then.
+    let below = CarmenOptions {
+        max_range: Some(29.495),
+        ..CarmenOptions::default()
+    };
+    let log = read_str(&coded_log(Some(29.5)), &below).unwrap();
+    assert_eq!(log.info.ranges.no_return_code(), None);
+    assert_eq!(log.records[0].scan.valid_count(), 180 - 36);
+    // Ranges spread as a room's are: no code.
+    let log = read_str(&coded_log(None), &CarmenOptions::default()).unwrap();
+    assert_eq!(log.info.ranges.no_return_code(), None);
+}
+
 /// Laser lines whose timestamps run back, and two ODOM lines out of order.
 fn jittered_log() -> String {
     [

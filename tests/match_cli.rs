@@ -196,3 +196,76 @@ fn bad_matcher_choices_are_refused() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--matcher"));
 }
+
+/// A room of 180 beams over 30 scans, the robot still, every fifth beam reading 29.5 m: a
+/// no-return code below the 30 m the log declares.
+fn coded_log(test: &str) -> PathBuf {
+    let dir = temp(test);
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut text = String::from("PARAM robot_front_laser_max 30 nohost 0\n");
+    for scan in 0..30 {
+        let ranges: Vec<String> = (0..180)
+            .map(|i| {
+                let r = if i % 5 == 0 {
+                    29.5
+                } else {
+                    2.0 + f64::from(i % 45) * 0.05
+                };
+                r.to_string()
+            })
+            .collect();
+        let t = f64::from(scan) * 0.2;
+        text += &format!("FLASER 180 {} 0 0 0 0 0 0 {t} host {t}\n", ranges.join(" "));
+    }
+    let log = dir.join("coded.clf");
+    std::fs::write(&log, text).unwrap();
+    log
+}
+
+#[test]
+fn a_no_return_code_is_named_and_the_laser_options_drop_it() {
+    let log = coded_log("coded");
+    let log = log.to_str().unwrap();
+    let out = temp("coded-out");
+    let run = |extra: &[&str]| {
+        let _ = std::fs::remove_dir_all(&out);
+        let mut args = vec![
+            "match",
+            log,
+            "--matcher",
+            "wsm",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        qicp(&args)
+    };
+    let o = run(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("1080 readings")
+            && err.contains("29.50 m")
+            && err.contains("--max-range 29.495"),
+        "{err}"
+    );
+    let o = run(&["--max-range", "29.495"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("no-return code"), "{err}");
+    // Values no laser has are refused by their flag's name, before any matching.
+    for (flag, value) in [
+        ("--fov-deg", "0"),
+        ("--max-range", "inf"),
+        ("--min-range", "-1"),
+    ] {
+        let o = run(&[&format!("{flag}={value}")]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(flag), "{err}");
+        assert!(!out.exists(), "{flag}: no output for a refused run");
+    }
+    // The options describe a log: not a bridge's scans.
+    let o = qicp(&["match", "--subscribe", "--max-range", "20"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--subscribe"));
+}

@@ -159,9 +159,14 @@ def read_carmen(
     lenient: bool = False,
     max_beams: int = 10000,
     order: Literal["file", "time"] = "file",
+    fov_deg: Optional[float] = None,
+    max_range: Optional[float] = None,
+    min_range: float = 0.0,
 ) -> Log:
     """Streams the laser records of a CARMEN log (plain or bzip2), in file order (the order
-    the laser took them) or, with ``order="time"``, sorted by time."""
+    the laser took them) or, with ``order="time"``, sorted by time. ``fov_deg``,
+    ``max_range`` and ``min_range`` describe the laser where the log does not say it right
+    (as ``qicp match --fov-deg/--max-range/--min-range``)."""
 
 def read_bag(
     path: _StrPath,

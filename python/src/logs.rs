@@ -120,20 +120,31 @@ impl Log {
 /// file order (`order="file"`, the order the laser took them) or sorted by time
 /// (`order="time"`, as `qicp convert` writes a bag): an iterator of `Record`. A malformed line
 /// raises `QicpError` naming its line (with `lenient=True` it is skipped and counted); a log
-/// without a laser record raises too.
+/// without a laser record raises too. `fov_deg`, `max_range` and `min_range` describe the laser
+/// where the log's lines and `PARAM`s do not say it right (as `qicp match --fov-deg`,
+/// `--max-range`, `--min-range`); each given wins over the log.
 #[pyfunction]
-#[pyo3(signature = (path, *, lenient = false, max_beams = DEFAULT_MAX_BEAMS, order = "file"))]
+#[pyo3(signature = (
+    path, *, lenient = false, max_beams = DEFAULT_MAX_BEAMS, order = "file", fov_deg = None,
+    max_range = None, min_range = 0.0
+))]
 pub(crate) fn read_carmen(
     path: PathBuf,
     lenient: bool,
     max_beams: usize,
     order: &str,
+    fov_deg: Option<f64>,
+    max_range: Option<f64>,
+    min_range: f64,
 ) -> PyResult<Log> {
     let order: RecordOrder = order.parse().map_err(QicpError::new_err)?;
     let options = CarmenOptions {
         lenient,
         max_beams,
         order,
+        flaser_fov_deg: fov_deg,
+        max_range,
+        min_range,
         ..CarmenOptions::default()
     };
     let reader = CarmenReader::open(&path, &options).map_err(refusal)?;

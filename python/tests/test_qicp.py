@@ -202,3 +202,16 @@ def test_a_reference_of_another_log_draws_no_relations_and_writes_nothing(intel,
     with pytest.raises(qicp.QicpError, match="is it this log's"):
         qicp.reference_relations(intel, reference, out, scans=100)
     assert not out.exists() and list(tmp_path.iterdir()) == [reference]
+
+
+def test_laser_options_describe_a_log_as_the_command_line_does(tmp_path):
+    log = tmp_path / "laser.clf"
+    ranges = " ".join(["2.0", "29.5"] * 45)
+    log.write_text(f"FLASER 90 {ranges} 0 0 0 0 0 0 1.0 host 1.0\n")
+    (r,) = list(qicp.read_carmen(log))
+    assert (r.range_max, r.range_min, r.angle_min) == (81.0, 0.0, -math.pi / 2)
+    (r,) = list(qicp.read_carmen(log, fov_deg=90.0, max_range=29.495, min_range=0.1))
+    assert (r.range_max, r.range_min) == (29.495, 0.1)
+    assert math.isclose(r.angle_min, -math.pi / 4)
+    with pytest.raises(qicp.QicpError, match="max_range"):
+        qicp.read_carmen(log, max_range=-1.0)

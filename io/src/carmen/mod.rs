@@ -236,6 +236,59 @@ pub struct LogInfo {
     pub span: Option<(f64, f64)>,
     /// Beams of the first record delivered.
     pub first_beams: usize,
+    /// The ranges the delivered scans keep, counted per centimetre.
+    pub ranges: RangeCounts,
+}
+
+/// Readings beyond this range (m) are not counted by [`RangeCounts`].
+const RANGE_COUNT_LIMIT: f64 = 200.0;
+/// A range that at least this many readings share, and at least [`CODE_RATIO`] times as
+/// many as the average centimetre of the metre below it, is a no-return code.
+const CODE_MIN_READINGS: u64 = 100;
+/// See [`CODE_MIN_READINGS`].
+const CODE_RATIO: f64 = 20.0;
+
+/// How many of a log's kept readings fall in each centimetre of range, up to 200 m: where a
+/// laser writes its no-returns as a value below the maximum range the log declares (the
+/// Freiburg clinic's `ROBOTLASER1` lines declare 81.9 m and write 81.83 m, a SICK LMS error
+/// code, in 5,849 readings), that value stands far above the metre below it, and every scan
+/// would keep phantom points there. [`RangeCounts::no_return_code`] finds it;
+/// [`LogInfo::warn`] names it and the `--max-range` that drops it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RangeCounts {
+    /// Readings per centimetre, `bins[k]` for ranges that round to k cm; empty until the
+    /// first scan.
+    bins: Vec<u64>,
+}
+
+impl RangeCounts {
+    /// Counts the ranges of the points `scan` keeps.
+    pub fn add(&mut self, scan: &qicp_core::Scan) {
+        if self.bins.is_empty() {
+            self.bins = vec![0; (RANGE_COUNT_LIMIT * 100.0) as usize + 1];
+        }
+        for k in 0..scan.points().len() {
+            let cm = (scan.point_range(k) * 100.0).round();
+            if (0.0..=RANGE_COUNT_LIMIT * 100.0).contains(&cm) {
+                self.bins[cm as usize] += 1;
+            }
+        }
+    }
+
+    /// The largest range kept, where it looks like a no-return code: the range (m), its
+    /// readings, and the average readings per centimetre in the metre below it.
+    #[must_use]
+    pub fn no_return_code(&self) -> Option<(f64, u64, f64)> {
+        let top = self.bins.iter().rposition(|&n| n > 0)?;
+        let count = self.bins[top];
+        let below = &self.bins[top.saturating_sub(100)..top];
+        let per_cm = below.iter().sum::<u64>() as f64 / below.len().max(1) as f64;
+        (count >= CODE_MIN_READINGS && count as f64 >= CODE_RATIO * per_cm.max(1.0)).then_some((
+            top as f64 / 100.0,
+            count,
+            per_cm,
+        ))
+    }
 }
 
 impl LogInfo {
@@ -312,6 +365,15 @@ impl LogInfo {
                 self.late,
                 path.display(),
                 DEFAULT_REORDER_WINDOW
+            );
+        }
+        if let Some((range, count, per_cm)) = self.ranges.no_return_code() {
+            qicp_core::note!(
+                "warning: {count} readings of {} read {range:.2} m, the largest range kept, \
+                 against {per_cm:.1} per centimetre in the metre below: a no-return code, \
+                 read as points? --max-range {:.3} drops them",
+                path.display(),
+                range - 0.005
             );
         }
         if !self.unknown_types.is_empty() {

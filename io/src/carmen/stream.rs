@@ -358,6 +358,7 @@ impl<R: BufRead> CarmenReader<R> {
         }
         self.delivered = t;
         self.info.records += 1;
+        self.info.ranges.add(&record.scan);
         self.info.span = Some(match self.info.span {
             None => {
                 self.info.first_beams = record.scan.beams();
