@@ -222,6 +222,18 @@ fn bad_experiment_configs_name_the_key() {
             "source.order",
         ),
         (
+            format!("[source]\nsim = \"{park}\"\nmax_range = 20.0\n"),
+            "source.max_range",
+        ),
+        (
+            "[source]\nlog = \"x.clf\"\nfov_deg = 0.0\n".to_string(),
+            "source.fov_deg",
+        ),
+        (
+            "[source]\nlog = \"x.clf\"\nmin_range = -1.0\n".to_string(),
+            "source.min_range",
+        ),
+        (
             format!("[source]\nsim = \"{park}\"\n[run]\nmatchers = []\n"),
             "run.matchers",
         ),

@@ -80,6 +80,18 @@ pub struct SourceConfig {
     /// `"time"` (sorted by timestamp, as `qicp convert` writes a bag). Default `"file"`.
     #[serde(default, with = "order_name", skip_serializing_if = "is_file_order")]
     pub order: RecordOrder,
+    /// Field of view of a CARMEN log's `FLASER` scans (degrees, in (0, 360]), as `qicp match
+    /// --fov-deg`. Default: the log's `PARAM laser_front_laser_fov`, else 180.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fov_deg: Option<f64>,
+    /// Readings of a CARMEN log at or beyond this are no-returns (m), as `qicp match
+    /// --max-range`. Default: the log's (`PARAM robot_front_laser_max`, else 81, for `FLASER`;
+    /// a `ROBOTLASER1` line's own field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_range: Option<f64>,
+    /// Readings of a CARMEN log below this are discarded (m). Default 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_range: Option<f64>,
 }
 
 impl SourceConfig {
@@ -107,6 +119,9 @@ impl SourceConfig {
             carmen: CarmenOptions {
                 lenient: self.lenient,
                 order: self.order,
+                flaser_fov_deg: self.fov_deg,
+                max_range: self.max_range,
+                min_range: self.min_range.unwrap_or(0.0),
                 ..CarmenOptions::default()
             },
             bag: BagOptions::new(
@@ -231,6 +246,10 @@ impl ExperimentConfig {
                     ("source.base_frame", s.base_frame.is_some()),
                     // A drive's records are made in time order; only a log's can be sorted.
                     ("source.order", s.order != RecordOrder::File),
+                    // A drive's laser is its world's.
+                    ("source.fov_deg", s.fov_deg.is_some()),
+                    ("source.max_range", s.max_range.is_some()),
+                    ("source.min_range", s.min_range.is_some()),
                 ] {
                     if set {
                         return Err(invalid(
@@ -258,6 +277,30 @@ impl ExperimentConfig {
                     if set {
                         return Err(invalid(key, "only for a `sim` source"));
                     }
+                }
+                if let Some(fov) = s.fov_deg
+                    && !(fov > 0.0 && fov <= 360.0)
+                {
+                    return Err(invalid(
+                        "source.fov_deg",
+                        format!("{fov} must lie in (0, 360]"),
+                    ));
+                }
+                if let Some(m) = s.max_range
+                    && !(m.is_finite() && m > 0.0)
+                {
+                    return Err(invalid(
+                        "source.max_range",
+                        format!("{m} must be finite and positive"),
+                    ));
+                }
+                if let Some(m) = s.min_range
+                    && !(m.is_finite() && m >= 0.0)
+                {
+                    return Err(invalid(
+                        "source.min_range",
+                        format!("{m} must be finite and non-negative"),
+                    ));
                 }
             }
         }
