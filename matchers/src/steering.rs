@@ -27,6 +27,7 @@ const STEERING_COMMON: &[(&str, Acts)] = &[
     ("motion.sigma_xy_per_m", Acts::Any),
     ("motion.sigma_theta_per_m_deg", Acts::Any),
     ("motion.calibration_m", Acts::Map),
+    ("motion.stall_prior_sigmas", Acts::Map),
     ("validation.inlier_distance", Acts::Any),
     ("validation.max_share_drop", Acts::Any),
     ("validation.max_pair_drop", Acts::Any),
@@ -62,6 +63,10 @@ const SWITCHED: &[(&str, &[&str])] = &[
     ("correlative.", &["validation.enabled", "validation.search"]),
     ("revisit.", &["validation.enabled", "revisit.enabled"]),
     ("motion.sigma_", &["motion.enabled"]),
+    (
+        "motion.stall_prior_sigmas",
+        &["motion.enabled", "motion.stall_velocity"],
+    ),
 ];
 
 /// Steering parameters that act only through another one: each is left out of the sweep

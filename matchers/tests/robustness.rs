@@ -8,8 +8,8 @@ use qicp_core::{
     Reference, Scan, ScanMatcher, SpatialIndex,
 };
 use qicp_matchers::{
-    CorrelativeParams, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind, Odometry, Pipeline,
-    Policy, Relevance, ValidationParams, Wsm, WsmParams,
+    CorrelativeParams, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind, MotionModel,
+    Odometry, Pipeline, Policy, Relevance, ValidationParams, Wsm, WsmParams,
 };
 
 /// The robot's pose at scan `k`: along the room, turning slowly.
@@ -835,6 +835,115 @@ fn a_scan_too_sparse_to_match_does_not_replace_the_scan_to_scan_reference() {
                 let (d, g) = error(&e.pose, k);
                 assert!(d < 0.05 && g < 0.5, "{kind:?} scan {k}: {d} m, {g}°");
             }
+        }
+    }
+}
+
+/// A matcher that keeps the prior of each of its calls.
+#[derive(Debug)]
+struct Recording<M> {
+    inner: M,
+    priors: std::sync::Arc<std::sync::Mutex<Vec<Option<Matrix3<f64>>>>>,
+}
+
+impl<M: ScanMatcher> ScanMatcher for Recording<M> {
+    fn name(&self) -> &'static str {
+        "recording"
+    }
+
+    fn match_with_prior<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan: &Scan,
+        guess: Pose2,
+        prior: Option<Matrix3<f64>>,
+    ) -> MatchResult {
+        self.priors.lock().expect("not poisoned").push(prior);
+        self.inner.match_with_prior(reference, scan, guess, prior)
+    }
+}
+
+/// The robot's pose at scan `k` of a brisk drive through the room: 0.2 m and 4° a scan.
+fn brisk(k: usize) -> Pose2 {
+    Pose2::new(-3.0 + 0.2 * k as f64, -1.0, (4.0 * k as f64).to_radians())
+}
+
+/// WSM as `policy` says, with `motion`, through 25 records of the brisk drive whose odometry
+/// reads the truth up to scan 9 and repeats that reading from scan 10 on (a stall, or a log
+/// that stops giving odometry). For each record: the prior of the matcher's first call, and
+/// the estimate's error (m) against the truth's motion since scan 0.
+fn stalled_drive(policy: Policy, motion: MotionModel) -> Vec<(Option<Matrix3<f64>>, f64)> {
+    let priors = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let mut pipeline = Pipeline::new(
+        "recording",
+        Recording {
+            inner: Plain::new(IcpParams::default(), WsmParams::default()),
+            priors: priors.clone(),
+        },
+        QuadTree::default(),
+        policy,
+        LaserNoise::default(),
+    )
+    .with_motion_model(motion);
+    let mut first = None;
+    (0..25)
+        .map(|k| {
+            let calls = priors.lock().expect("not poisoned").len();
+            let e = pipeline.process(&room_record_at(&brisk(k), k, brisk(k.min(9))));
+            let first = *first.get_or_insert(e.pose);
+            let error = first
+                .between(&e.pose)
+                .distance(&brisk(0).between(&brisk(k)));
+            (priors.lock().expect("not poisoned")[calls], error)
+        })
+        .collect()
+}
+
+fn close_information(a: &Matrix3<f64>, b: &Matrix3<f64>) -> bool {
+    (0..3).all(|i| (a[(i, i)] - b[(i, i)]).abs() <= 0.05 * b[(i, i)])
+}
+
+#[test]
+fn a_stall_against_a_map_weighs_the_velocity_prediction_as_a_looser_prior() {
+    let motion = MotionModel::default();
+    // Scan 10 contradicts the repeated reading (0.2 m and 4° against a robot standing still,
+    // χ² 32): from scan 11 on the records are predicted at the velocity of the last checked
+    // match, scan 9's.
+    let step = brisk(0).between(&brisk(1));
+    let odometry = motion.information(&step).expect("a prior");
+    let stall = motion.stall_information(&step).expect("a stall prior");
+    let standing = motion.information(&Pose2::IDENTITY).expect("a prior");
+    let k = motion.stall_prior_sigmas;
+    assert!(close_information(&(odometry / (k * k)), &stall));
+    let map = stalled_drive(Policy::Boosted(Relevance::default()), motion);
+    for (scan, (prior, error)) in map.iter().enumerate() {
+        let prior = prior.unwrap_or_else(|| panic!("scan {scan}: no prior"));
+        match scan {
+            0 => {}
+            1..=9 => assert!(close_information(&prior, &odometry), "scan {scan}"),
+            // The first repeat: the reading's prior, a robot standing still.
+            10 => assert!(close_information(&prior, &standing), "scan {scan}"),
+            _ => assert!(
+                close_information(&prior, &stall),
+                "scan {scan}: {prior} against {stall}"
+            ),
+        }
+        // It vetoes nothing: the drive is followed as with odometry.
+        assert!(*error < 0.03, "scan {scan}: {error:.3} m off");
+    }
+    // Scan to scan, and with `stall_prior_sigmas = 0`, a stall's records are matched without
+    // a prior, and followed as well.
+    let off = MotionModel {
+        stall_prior_sigmas: 0.0,
+        ..motion
+    };
+    for (policy, motion) in [
+        (Policy::Incremental(Relevance::default()), motion),
+        (Policy::Boosted(Relevance::default()), off),
+    ] {
+        for (scan, (prior, error)) in stalled_drive(policy, motion).iter().enumerate().skip(11) {
+            assert!(prior.is_none(), "scan {scan}: {policy:?} {prior:?}");
+            assert!(*error < 0.03, "scan {scan}: {error:.3} m off");
         }
     }
 }
