@@ -201,7 +201,7 @@ fn bad_matcher_choices_are_refused() {
 /// no-return code below the 30 m the log declares.
 fn coded_log(test: &str) -> PathBuf {
     let dir = temp(test);
-    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::create_dir_all(&dir).expect("a scratch directory");
     let mut text = String::from("PARAM robot_front_laser_max 30 nohost 0\n");
     for scan in 0..30 {
         let ranges: Vec<String> = (0..180)
@@ -218,7 +218,7 @@ fn coded_log(test: &str) -> PathBuf {
         text += &format!("FLASER 180 {} 0 0 0 0 0 0 {t} host {t}\n", ranges.join(" "));
     }
     let log = dir.join("coded.clf");
-    std::fs::write(&log, text).unwrap();
+    std::fs::write(&log, text).expect("the log written");
     log
 }
 
