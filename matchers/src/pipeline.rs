@@ -270,17 +270,21 @@ pub struct MotionModel {
     /// (every reading the same) is one such stall from its second record on. false predicts
     /// a stall's records where the repeated reading says, with its prior. Default true.
     pub stall_velocity: bool,
-    /// With `stall_velocity`, against a map, the prediction at the last checked velocity is
-    /// weighed as a prior (by the matchers that take one: WSM weighs it against its pairs, IDC
-    /// fuses it and sizes its first gate and window by it), with this many times the standard
-    /// deviations this model gives the same motion by odometry: a constant velocity predicts
-    /// less surely than wheels measure. Unlike odometry's prior it vetoes nothing; it keeps
-    /// the prediction where the scan pins nothing, as along a corridor, where a match would
-    /// otherwise slide and write a shifted copy of its walls into the map. Scan to scan a slid
-    /// match costs only its own step, and no prior is weighed (with it, on Intel without
-    /// odometry, idc scored 0.877 m against 0.740 m). 0: no prior (the prediction only starts
-    /// the match). Default 2. (On Intel with every odometry reading zeroed, the q-wsm sweep
-    /// had 33 of 60 variants above 0.05 m without it, 6 at 2 and 6 at 5; see the README.)
+    /// With `stall_velocity`, in a log without odometry (every reading so far the first one),
+    /// against a map, the prediction at the last checked velocity is weighed as a prior (by
+    /// the matchers that take one: WSM weighs it against its pairs, IDC fuses it and sizes its
+    /// first gate and window by it), with this many times the standard deviations this model
+    /// gives the same motion by odometry: a constant velocity predicts less surely than wheels
+    /// measure. Unlike odometry's prior it vetoes nothing; it keeps the prediction where the
+    /// scan pins nothing, as along a corridor, where a match would otherwise slide and write a
+    /// shifted copy of its walls into the map. Where a log's odometry stalls for a few records
+    /// (a burst of jittered records with one reading, as Intel's) the velocity is no such
+    /// prediction, and no prior is weighed (with one, 12 passes of Intel lost their map in
+    /// passes 11 and 12). Scan to scan a slid match costs only its own step, and no prior is
+    /// weighed (with one, on Intel without odometry, idc scored 0.877 m against 0.740 m).
+    /// 0: no prior (the prediction only starts the match). Default 2. (On Intel with every
+    /// odometry reading zeroed, the q-wsm sweep had 33 of 60 variants above 0.05 m without it,
+    /// 6 at 2 and 6 at 5; see the README.)
     pub stall_prior_sigmas: f64,
 }
 
@@ -502,6 +506,10 @@ pub struct Pipeline<M, I> {
     search: CorrelativeSearch,
     /// Odometry's scale and drift, fitted to the accepted matches.
     calibration: OdometryCalibration,
+    /// The first record's odometry reading, and whether a later one has differed from it:
+    /// until one does, the log has no odometry ([`MotionModel::stall_prior_sigmas`]).
+    first_reading: Option<Pose2>,
+    odometry_moved: bool,
 }
 
 impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
@@ -533,6 +541,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             search: CorrelativeSearch::new(CorrelativeParams::default()),
             revisit: Revisit::new(RevisitParams::default()),
             renumberings: 0,
+            first_reading: None,
+            odometry_moved: false,
             calibration: OdometryCalibration::default(),
         }
         .with_motion_model(MotionModel::default())
@@ -713,6 +723,8 @@ where
         // The odometry motion since the previous record, as a motion of the laser.
         // Corrected by the calibration fitted so far: the prediction and the prior's centre.
         let fresh = self.last.is_none_or(|(odom, _)| record.odometry != odom);
+        let first_reading = *self.first_reading.get_or_insert(record.odometry);
+        self.odometry_moved |= record.odometry != first_reading;
         // A reading repeated while the matches saw the robot move holds no motion: the record
         // is predicted at the last checked velocity, without odometry's prior.
         let stalled =
@@ -751,14 +763,17 @@ where
             self.motion.information(&step)
         };
         let boosted = self.policy.is_map();
-        // Against a map, a stall's prediction at the last checked velocity is weighed as a
-        // prior of its own, looser than odometry's, that vetoes nothing: a scan that pins only
-        // some directions (a corridor) keeps the constant-velocity prediction in the others,
-        // rather than slide and write a shifted copy of its walls into the map.
-        let weighed = match (stalled, boosted) {
-            (true, true) => self.motion.stall_information(&self.velocity),
-            (true, false) => None,
-            (false, _) => prior,
+        // Against a map, in a log without odometry, the prediction at the last checked
+        // velocity is weighed as a prior of its own, looser than odometry's, that vetoes
+        // nothing: a scan that pins only some directions (a corridor) keeps the
+        // constant-velocity prediction in the others, rather than slide and write a shifted
+        // copy of its walls into the map.
+        let weighed = if stalled {
+            (boosted && !self.odometry_moved)
+                .then(|| self.motion.stall_information(&self.velocity))
+                .flatten()
+        } else {
+            prior
         };
         let (mut result, mut check, passed) = self.match_checked(&record.scan, guess, weighed);
         // On a revisit the match may be re-anchored to the old map: a correction of drift,

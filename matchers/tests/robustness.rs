@@ -868,11 +868,14 @@ fn brisk(k: usize) -> Pose2 {
     Pose2::new(-3.0 + 0.2 * k as f64, -1.0, (4.0 * k as f64).to_radians())
 }
 
-/// WSM as `policy` says, with `motion`, through 25 records of the brisk drive whose odometry
-/// reads the truth up to scan 9 and repeats that reading from scan 10 on (a stall, or a log
-/// that stops giving odometry). For each record: the prior of the matcher's first call, and
-/// the estimate's error (m) against the truth's motion since scan 0.
-fn stalled_drive(policy: Policy, motion: MotionModel) -> Vec<(Option<Matrix3<f64>>, f64)> {
+/// WSM as `policy` says, with `motion`, through 25 records of the brisk drive, its odometry
+/// reading `reading(k)` at scan `k`. For each record: the prior of the matcher's first call,
+/// and the estimate's error (m) against the truth's motion since scan 0.
+fn brisk_drive(
+    policy: Policy,
+    motion: MotionModel,
+    reading: impl Fn(usize) -> Pose2,
+) -> Vec<(Option<Matrix3<f64>>, f64)> {
     let priors = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let mut pipeline = Pipeline::new(
         "recording",
@@ -889,7 +892,7 @@ fn stalled_drive(policy: Policy, motion: MotionModel) -> Vec<(Option<Matrix3<f64
     (0..25)
         .map(|k| {
             let calls = priors.lock().expect("not poisoned").len();
-            let e = pipeline.process(&room_record_at(&brisk(k), k, brisk(k.min(9))));
+            let e = pipeline.process(&room_record_at(&brisk(k), k, reading(k)));
             let first = *first.get_or_insert(e.pose);
             let error = first
                 .between(&e.pose)
@@ -904,46 +907,54 @@ fn close_information(a: &Matrix3<f64>, b: &Matrix3<f64>) -> bool {
 }
 
 #[test]
-fn a_stall_against_a_map_weighs_the_velocity_prediction_as_a_looser_prior() {
+fn without_odometry_a_map_weighs_the_velocity_prediction_as_a_looser_prior() {
     let motion = MotionModel::default();
-    // Scan 10 contradicts the repeated reading (0.2 m and 4° against a robot standing still,
-    // χ² 32): from scan 11 on the records are predicted at the velocity of the last checked
-    // match, scan 9's.
     let step = brisk(0).between(&brisk(1));
-    let odometry = motion.information(&step).expect("a prior");
     let stall = motion.stall_information(&step).expect("a stall prior");
-    let standing = motion.information(&Pose2::IDENTITY).expect("a prior");
     let k = motion.stall_prior_sigmas;
-    assert!(close_information(&(odometry / (k * k)), &stall));
-    let map = stalled_drive(Policy::Boosted(Relevance::default()), motion);
-    for (scan, (prior, error)) in map.iter().enumerate() {
+    assert!(close_information(
+        &(motion.information(&step).expect("a prior") / (k * k)),
+        &stall
+    ));
+    // No odometry: every record reads the same pose. Scan 1 contradicts it (0.2 m and 4°
+    // against a robot standing still, χ² 32), and from the first checked match on the records
+    // are predicted at its velocity, and weighed by it.
+    let none = |_| Pose2::IDENTITY;
+    let map = brisk_drive(Policy::Boosted(Relevance::default()), motion, none);
+    for (scan, (prior, error)) in map.iter().enumerate().skip(12) {
         let prior = prior.unwrap_or_else(|| panic!("scan {scan}: no prior"));
-        match scan {
-            0 => {}
-            1..=9 => assert!(close_information(&prior, &odometry), "scan {scan}"),
-            // The first repeat: the reading's prior, a robot standing still.
-            10 => assert!(close_information(&prior, &standing), "scan {scan}"),
-            _ => assert!(
-                close_information(&prior, &stall),
-                "scan {scan}: {prior} against {stall}"
-            ),
-        }
-        // It vetoes nothing: the drive is followed as with odometry.
+        assert!(
+            close_information(&prior, &stall),
+            "scan {scan}: {prior} against {stall}"
+        );
+        // It vetoes nothing: the drive is followed.
         assert!(*error < 0.03, "scan {scan}: {error:.3} m off");
     }
-    // Scan to scan, and with `stall_prior_sigmas = 0`, a stall's records are matched without
-    // a prior, and followed as well.
+    // No prior scan to scan, nor with `stall_prior_sigmas = 0`, nor where a log's odometry
+    // stalls (reading the truth up to scan 9, then repeating it: a burst of records with one
+    // reading, whose velocity is no such prediction); each drive is followed as well.
     let off = MotionModel {
         stall_prior_sigmas: 0.0,
         ..motion
     };
-    for (policy, motion) in [
-        (Policy::Incremental(Relevance::default()), motion),
-        (Policy::Boosted(Relevance::default()), off),
+    let stalls = |k: usize| brisk(k.min(9));
+    for (name, drive) in [
+        (
+            "scan to scan",
+            brisk_drive(Policy::Incremental(Relevance::default()), motion, none),
+        ),
+        (
+            "prior off",
+            brisk_drive(Policy::Boosted(Relevance::default()), off, none),
+        ),
+        (
+            "odometry that stalls",
+            brisk_drive(Policy::Boosted(Relevance::default()), motion, stalls),
+        ),
     ] {
-        for (scan, (prior, error)) in stalled_drive(policy, motion).iter().enumerate().skip(11) {
-            assert!(prior.is_none(), "scan {scan}: {policy:?} {prior:?}");
-            assert!(*error < 0.03, "scan {scan}: {error:.3} m off");
+        for (scan, (prior, error)) in drive.iter().enumerate().skip(12) {
+            assert!(prior.is_none(), "{name}, scan {scan}: {prior:?}");
+            assert!(*error < 0.03, "{name}, scan {scan}: {error:.3} m off");
         }
     }
 }
