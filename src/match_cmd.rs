@@ -62,7 +62,7 @@ pub struct MatchArgs {
 }
 
 /// A CARMEN log's laser, where its lines and `PARAM`s do not say it right: an option given
-/// here wins over the log (ROS 2 bags carry their own in every scan message).
+/// here wins over the log. A ROS 2 bag, whose scans carry their own, is refused with them.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct LaserArgs {
     /// Field of view of `FLASER` scans (degrees, in (0, 360]). Default: the log's

@@ -151,6 +151,24 @@ fn a_bag_matched_without_its_odometry_follows_the_run_with_it() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
+    // A CARMEN log's laser options would be ignored on a bag: refused, and no output left.
+    let run_dir = dir.path().join("laser");
+    let out = qicp(&[
+        "match",
+        bag_arg,
+        "--matcher",
+        "wsm",
+        "--out",
+        run_dir.to_str().expect("utf-8"),
+        "--max-range",
+        "20",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("max_range") && err.contains("bag"),
+        "{err}"
+    );
+    assert!(!run_dir.exists());
 }
 
 #[test]

@@ -38,8 +38,26 @@ pub enum LogReader {
 
 impl LogReader {
     /// Opens `path` as a ROS 2 bag when it starts with MCAP's magic bytes, else as CARMEN.
+    /// A bag is refused with CARMEN's laser options set (field of view, range limits): its
+    /// scans carry their own, and the options would be ignored.
     pub fn open(path: &Path, opts: &LogOptions) -> Result<Self, LogError> {
         if is_mcap(path) {
+            let c = &opts.carmen;
+            let set = [
+                ("flaser_fov_deg", c.flaser_fov_deg.is_some()),
+                ("max_range", c.max_range.is_some()),
+                ("min_range", c.min_range != 0.0),
+            ];
+            if let Some((name, _)) = set.into_iter().find(|(_, set)| *set) {
+                return Err(LogError::InvalidOption {
+                    name,
+                    why: format!(
+                        "describes a CARMEN log's laser; {} is a ROS 2 bag, whose scans carry \
+                         their own",
+                        path.display()
+                    ),
+                });
+            }
             Ok(Self::Bag(Box::new(BagReader::open(path, &opts.bag)?)))
         } else {
             Ok(Self::Carmen(Box::new(CarmenReader::open(
