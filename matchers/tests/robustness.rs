@@ -131,15 +131,20 @@ fn a_start_twenty_degrees_off_is_recovered() {
     }
 }
 
-/// A matcher that returns a wrong pose on its `at`-th call, as a match that converged into
-/// the wrong basin would: `wrong` turns the right pose into the wrong one.
+/// A matcher that returns a wrong pose on its `at`-th call (0: never), as a match that
+/// converged into the wrong basin would: `wrong` turns the right pose into the wrong one. It
+/// keeps the prior of each call in `priors`.
 #[derive(Debug)]
 struct Sabotaged<M> {
     inner: M,
     calls: usize,
     at: usize,
     wrong: fn(&Pose2) -> Pose2,
+    priors: Priors,
 }
+
+/// The priors a [`Sabotaged`] matcher was given, one per call.
+type Priors = std::sync::Arc<std::sync::Mutex<Vec<Option<Matrix3<f64>>>>>;
 
 /// Off by 0.4 m and 0.3 m in the scan's frame, and turned by 15°.
 fn turned(p: &Pose2) -> Pose2 {
@@ -158,6 +163,7 @@ impl<M: ScanMatcher> ScanMatcher for Sabotaged<M> {
         guess: Pose2,
         prior: Option<Matrix3<f64>>,
     ) -> MatchResult {
+        self.priors.lock().expect("not poisoned").push(prior);
         let mut result = self.inner.match_with_prior(reference, scan, guess, prior);
         self.calls += 1;
         if self.calls == self.at {
@@ -191,6 +197,7 @@ fn sabotaged_with(
             calls: 0,
             at,
             wrong,
+            priors: Priors::default(),
         },
         QuadTree::default(),
         Policy::Boosted(every_scan),
@@ -839,30 +846,6 @@ fn a_scan_too_sparse_to_match_does_not_replace_the_scan_to_scan_reference() {
     }
 }
 
-/// A matcher that keeps the prior of each of its calls.
-#[derive(Debug)]
-struct Recording<M> {
-    inner: M,
-    priors: std::sync::Arc<std::sync::Mutex<Vec<Option<Matrix3<f64>>>>>,
-}
-
-impl<M: ScanMatcher> ScanMatcher for Recording<M> {
-    fn name(&self) -> &'static str {
-        "recording"
-    }
-
-    fn match_with_prior<I: SpatialIndex>(
-        &mut self,
-        reference: &Reference<I>,
-        scan: &Scan,
-        guess: Pose2,
-        prior: Option<Matrix3<f64>>,
-    ) -> MatchResult {
-        self.priors.lock().expect("not poisoned").push(prior);
-        self.inner.match_with_prior(reference, scan, guess, prior)
-    }
-}
-
 /// The robot's pose at scan `k` of a brisk drive through the room: 0.2 m and 4° a scan.
 fn brisk(k: usize) -> Pose2 {
     Pose2::new(-3.0 + 0.2 * k as f64, -1.0, (4.0 * k as f64).to_radians())
@@ -876,11 +859,14 @@ fn brisk_drive(
     motion: MotionModel,
     reading: impl Fn(usize) -> Pose2,
 ) -> Vec<(Option<Matrix3<f64>>, f64)> {
-    let priors = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let priors = Priors::default();
     let mut pipeline = Pipeline::new(
         "recording",
-        Recording {
+        Sabotaged {
             inner: Plain::new(IcpParams::default(), WsmParams::default()),
+            calls: 0,
+            at: 0,
+            wrong: turned,
             priors: priors.clone(),
         },
         QuadTree::default(),
