@@ -67,46 +67,22 @@ pub struct MatchArgs {
 pub struct LaserArgs {
     /// Field of view of `FLASER` scans (degrees, in (0, 360]). Default: the log's
     /// `PARAM laser_front_laser_fov`, else 180.
-    #[arg(long, value_name = "DEG", value_parser = fov_deg)]
+    #[arg(long, value_name = "DEG", value_parser = |s: &str| laser_value(s, crate::logs::carmen::fov_deg_problem))]
     pub fov_deg: Option<f64>,
     /// Readings at or beyond this are no-returns (m). Default: `PARAM robot_front_laser_max`
     /// for `FLASER` lines, else 81 (SICK LMS no-returns read 81.83-81.91 m); a `ROBOTLASER1`
     /// line's own `max_range` field.
-    #[arg(long, value_name = "M", value_parser = positive_range)]
+    #[arg(long, value_name = "M", value_parser = |s: &str| laser_value(s, crate::logs::carmen::max_range_problem))]
     pub max_range: Option<f64>,
     /// Readings below this are discarded (m). Default 0.
-    #[arg(long, value_name = "M", value_parser = non_negative_range)]
+    #[arg(long, value_name = "M", value_parser = |s: &str| laser_value(s, crate::logs::carmen::min_range_problem))]
     pub min_range: Option<f64>,
 }
 
-/// `--fov-deg`: a number in (0, 360].
-fn fov_deg(s: &str) -> Result<f64, String> {
+/// A number that `problem` does not refuse (`--fov-deg`, `--max-range`, `--min-range`).
+fn laser_value(s: &str, problem: fn(f64) -> Option<&'static str>) -> Result<f64, String> {
     let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if v > 0.0 && v <= 360.0 {
-        Ok(v)
-    } else {
-        Err("must lie in (0, 360]".into())
-    }
-}
-
-/// `--max-range`: a finite number above 0.
-fn positive_range(s: &str) -> Result<f64, String> {
-    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err("must be finite and positive".into())
-    }
-}
-
-/// `--min-range`: a finite number of at least 0.
-fn non_negative_range(s: &str) -> Result<f64, String> {
-    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        Err("must be finite and non-negative".into())
-    }
+    problem(v).map_or(Ok(v), |why| Err(why.into()))
 }
 
 impl LaserArgs {

@@ -278,29 +278,17 @@ impl ExperimentConfig {
                         return Err(invalid(key, "only for a `sim` source"));
                     }
                 }
-                if let Some(fov) = s.fov_deg
-                    && !(fov > 0.0 && fov <= 360.0)
-                {
-                    return Err(invalid(
-                        "source.fov_deg",
-                        format!("{fov} must lie in (0, 360]"),
-                    ));
-                }
-                if let Some(m) = s.max_range
-                    && !(m.is_finite() && m > 0.0)
-                {
-                    return Err(invalid(
-                        "source.max_range",
-                        format!("{m} must be finite and positive"),
-                    ));
-                }
-                if let Some(m) = s.min_range
-                    && !(m.is_finite() && m >= 0.0)
-                {
-                    return Err(invalid(
-                        "source.min_range",
-                        format!("{m} must be finite and non-negative"),
-                    ));
+                use qicp_io::carmen::{fov_deg_problem, max_range_problem, min_range_problem};
+                for (key, value, problem) in [
+                    ("source.fov_deg", s.fov_deg, fov_deg_problem as fn(f64) -> _),
+                    ("source.max_range", s.max_range, max_range_problem),
+                    ("source.min_range", s.min_range, min_range_problem),
+                ] {
+                    if let Some(v) = value
+                        && let Some(why) = problem(v)
+                    {
+                        return Err(invalid(key, format!("{v} {why}")));
+                    }
                 }
             }
         }

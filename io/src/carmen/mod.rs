@@ -163,6 +163,25 @@ impl Default for CarmenOptions {
     }
 }
 
+/// Why `fov` (deg) cannot be a laser's field of view ([`CarmenOptions::flaser_fov_deg`]), or
+/// `None` when it can.
+#[must_use]
+pub fn fov_deg_problem(fov: f64) -> Option<&'static str> {
+    (!(fov.is_finite() && fov > 0.0 && fov <= 360.0)).then_some("must lie in (0, 360]")
+}
+
+/// Why `m` cannot be a laser's maximum range ([`CarmenOptions::max_range`]), or `None`.
+#[must_use]
+pub fn max_range_problem(m: f64) -> Option<&'static str> {
+    (!(m.is_finite() && m > 0.0)).then_some("must be finite and positive")
+}
+
+/// Why `m` cannot be a laser's minimum range ([`CarmenOptions::min_range`]), or `None`.
+#[must_use]
+pub fn min_range_problem(m: f64) -> Option<&'static str> {
+    (!(m.is_finite() && m >= 0.0)).then_some("must be finite and non-negative")
+}
+
 impl CarmenOptions {
     /// Refuses options that cannot describe a laser.
     pub fn validate(&self) -> Result<(), LogError> {
@@ -172,18 +191,14 @@ impl CarmenOptions {
                 why: why.to_string(),
             })
         };
-        if let Some(fov) = self.flaser_fov_deg
-            && !(fov.is_finite() && fov > 0.0 && fov <= 360.0)
-        {
-            return bad("flaser_fov_deg", "must lie in (0, 360]");
+        if let Some(why) = self.flaser_fov_deg.and_then(fov_deg_problem) {
+            return bad("flaser_fov_deg", why);
         }
-        if let Some(m) = self.max_range
-            && !(m.is_finite() && m > 0.0)
-        {
-            return bad("max_range", "must be finite and positive");
+        if let Some(why) = self.max_range.and_then(max_range_problem) {
+            return bad("max_range", why);
         }
-        if !(self.min_range.is_finite() && self.min_range >= 0.0) {
-            return bad("min_range", "must be finite and non-negative");
+        if let Some(why) = min_range_problem(self.min_range) {
+            return bad("min_range", why);
         }
         if let Some(o) = self.laser_offset
             && !o.is_finite()
