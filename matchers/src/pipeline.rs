@@ -7,7 +7,7 @@ use crate::correlative::{CorrelativeParams, CorrelativeSearch};
 use crate::icp::non_negative;
 use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 use crate::revisit::{Revisit, RevisitParams};
-use crate::validation::{Check, Fit, ValidationParams, Validator, is_poor};
+use crate::validation::{Check, FieldOfView, Fit, ValidationParams, Validator, is_poor};
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
     ScanMatcher, SpatialIndex,
@@ -489,6 +489,8 @@ pub struct Pipeline<M, I> {
     /// Pose of the reference frame in the world, as the policy sets it: the identity for a
     /// map, the reference scan's laser pose scan to scan.
     reference_frame: Pose2,
+    /// What the last scan that entered the reference saw ([`ValidationParams::skip_unseen`]).
+    view: Option<FieldOfView>,
     /// Odometry and estimated laser pose of the previous record.
     last: Option<(Pose2, Pose2)>,
     /// The laser's motion over the last record whose match passed the check, as matched (a
@@ -534,6 +536,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             policy: policy.into(),
             motion: MotionModel::default(),
             reference_frame: Pose2::IDENTITY,
+            view: None,
             last: None,
             velocity: Pose2::IDENTITY,
             run: None,
@@ -639,9 +642,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             self.validator.record(fit);
             check.inlier_share = fit.share;
             check.refused = self.validator.refuse(fit, level);
-            if check.refused
-                && self.validator.inlier_share(&self.reference, local, &guess) >= fit.share
-            {
+            if check.refused && self.share(local, &guess) >= fit.share {
                 // The prediction explains the scan at least as well: the match went astray,
                 // and the next prediction must not start from it.
                 result = MatchResult::fallback(guess, Fallback::Refused);
@@ -650,11 +651,19 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         (result, check, passed)
     }
 
+    /// The share of the scan `local` at `pose` the reference explains, of the points it could
+    /// have seen ([`ValidationParams::skip_unseen`]).
+    fn share(&self, local: &[Point2<f64>], pose: &Pose2) -> f64 {
+        let view = self.view.filter(|_| self.validator.params.skip_unseen);
+        self.validator
+            .seen_share(&self.reference, local, pose, view.as_ref())
+    }
+
     /// What the check weighs of a match of the scan `local`: the share of it the reference
     /// explains, the residual and the pairs.
     fn fit(&self, local: &[Point2<f64>], r: &MatchResult) -> Fit {
         Fit {
-            share: self.validator.inlier_share(&self.reference, local, &r.pose),
+            share: self.share(local, &r.pose),
             residual: r.residual,
             pairs: r.correspondences as f64,
         }
@@ -798,10 +807,7 @@ where
             && let Some(lambda) = prior
         {
             let local = record.scan.points();
-            let gained = || {
-                (check.inlier_share - self.validator.inlier_share(&self.reference, local, &guess))
-                    * local.len() as f64
-            };
+            let gained = || (check.inlier_share - self.share(local, &guess)) * local.len() as f64;
             if !self
                 .validator
                 .outweighs_odometry(gained, &lambda, &guess, &result.pose)
@@ -812,6 +818,12 @@ where
         let laser = self.reference_frame * result.pose;
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
+        if inserted {
+            self.view = Some(FieldOfView::of(
+                &record.scan,
+                self.reference_frame.between(&laser),
+            ));
+        }
         if boosted && self.reference.renumberings() != self.renumberings {
             self.renumberings = self.reference.renumberings();
             self.revisit.renumbered();

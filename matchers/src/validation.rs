@@ -21,10 +21,14 @@
 //! 4. a match odometry contradicts beyond its uncertainty (`max_odometry_chi2`) does not enter
 //!    the map either, and falls back to the prediction unless the points it explains beyond
 //!    the prediction outweigh odometry's disagreement (`veto_falls_back`, `point_evidence`).
+//!
+//! The share counts only the points the reference could have seen (`skip_unseen`): new ground,
+//! away from every map point and outside the last inserted scan's field of view, is no sign of
+//! a wrong match.
 
 use crate::ConfigError;
 use crate::icp::positive;
-use qicp_core::{Matrix3, Point2, Pose2, Reference, SpatialIndex, Vector3};
+use qicp_core::{Matrix3, Point2, Pose2, Reference, Scan, SpatialIndex, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -89,6 +93,17 @@ pub struct ValidationParams {
     /// probability 0.99 at the right pose and 0.3 at a wrong one (ln(0.99·0.7 / (0.3·0.01))
     /// ≈ 5.4); the points of a scan are not independent, so this is generous to the scan.
     pub point_evidence: f64,
+    /// A scan point the reference could not have seen counts in neither part of the share:
+    /// one farther than twice `inlier_distance` from every reference point and outside the
+    /// field of view of the last scan that entered the reference (at a bearing from its
+    /// laser that none of its beams took; [`FieldOfView`]). New ground beside a robot backing
+    /// along a corridor, or behind one that has turned, then does not lower the share of a
+    /// right match; a wrong match still moves points off the surfaces the map holds within
+    /// that view. false counts every point of the scan. Default true. (On Intel played
+    /// backwards, counting every point, a level 17.5 % below the median refused such scans
+    /// along a corridor, and the search slid their poses back onto the walls the map held:
+    /// q-idc 0.30 m against 0.021 m; see the README.)
+    pub skip_unseen: bool,
 }
 
 impl Default for ValidationParams {
@@ -105,6 +120,7 @@ impl Default for ValidationParams {
             max_odometry_chi2: 16.3,
             veto_falls_back: true,
             point_evidence: 5.0,
+            skip_unseen: true,
         }
     }
 }
@@ -222,6 +238,43 @@ pub struct Validator {
     refusals: usize,
 }
 
+/// The field of view of the last scan that entered a reference: its laser pose in the
+/// reference frame and the bearings its beams spanned (half a beam step beyond the first and
+/// the last).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldOfView {
+    /// The inverse of the laser's pose: from the reference frame into the laser's.
+    to_laser: Pose2,
+    /// The bearing halfway between the first beam and the last (rad).
+    middle: f64,
+    /// Half the span (rad); π or more sees all round.
+    half_span: f64,
+}
+
+impl FieldOfView {
+    /// What `scan` saw from `laser` (its pose in the reference frame).
+    #[must_use]
+    pub fn of(scan: &Scan, laser: Pose2) -> Self {
+        let g = &scan.geometry;
+        let first = g.angle_min;
+        let last = g.angle(scan.beams().saturating_sub(1));
+        Self {
+            to_laser: laser.inverse(),
+            middle: 0.5 * (first + last),
+            half_span: 0.5 * (last - first).abs() + 0.5 * g.angle_increment.abs(),
+        }
+    }
+
+    /// True where `p` (reference frame) lies at a bearing from the laser that the scan's
+    /// beams spanned; every range counts.
+    #[must_use]
+    pub fn contains(&self, p: &Point2<f64>) -> bool {
+        let local = self.to_laser.transform_point(p);
+        let bearing = local.y.atan2(local.x);
+        qicp_core::normalize_angle(bearing - self.middle).abs() <= self.half_span
+    }
+}
+
 /// How well a match fits its reference.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fit {
@@ -305,20 +358,44 @@ impl Validator {
         local: &[Point2<f64>],
         pose: &Pose2,
     ) -> f64 {
+        self.seen_share(reference, local, pose, None)
+    }
+
+    /// As [`Validator::inlier_share`], over the points the reference could have seen: a point
+    /// farther than twice `inlier_distance` from every reference point and outside `view`
+    /// does not count ([`ValidationParams::skip_unseen`]). Every point counts without a view,
+    /// and where none could have been seen.
+    #[must_use]
+    pub fn seen_share<I: SpatialIndex>(
+        &self,
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+        view: Option<&FieldOfView>,
+    ) -> f64 {
         if local.is_empty() {
             return 0.0;
         }
         let d = self.params.inlier_distance;
         let reach = 2.0 * d;
-        let explained = local
-            .iter()
-            .filter(|q| {
-                reference
-                    .surface_distance_sq(&pose.transform_point(q), reach * reach)
-                    .is_some_and(|e_sq| e_sq.sqrt() <= d)
-            })
-            .count();
-        explained as f64 / local.len() as f64
+        let (mut explained, mut seen) = (0usize, 0usize);
+        for q in local {
+            let p = pose.transform_point(q);
+            let surface = reference.surface_distance_sq(&p, reach * reach);
+            // With no reference point within the reach a point is unexplained; outside the
+            // view it was also unseen.
+            if surface.is_none() && view.is_some_and(|v| !v.contains(&p)) {
+                continue;
+            }
+            seen += 1;
+            explained += usize::from(surface.is_some_and(|e_sq| e_sq.sqrt() <= d));
+        }
+        // Where no point could have been seen, none is explained: the share is 0, as counted
+        // over every point.
+        if seen == 0 {
+            return 0.0;
+        }
+        explained as f64 / seen as f64
     }
 
     /// The level below which a match is poor; `None` while the history is too short to tell.

@@ -4,12 +4,13 @@
 
 use qicp_core::testdata::SyntheticWorld;
 use qicp_core::{
-    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, MutualNearest, Pose2, QuadTree, Record,
-    Reference, Scan, ScanMatcher, SpatialIndex,
+    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, MutualNearest, Pose2, QuadTree,
+    Record, Reference, Scan, ScanMatcher, SpatialIndex,
 };
 use qicp_matchers::{
-    CorrelativeParams, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind, MotionModel,
-    Odometry, Pipeline, Policy, Relevance, ValidationParams, Wsm, WsmParams,
+    CorrelativeParams, FieldOfView, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind,
+    MotionModel, Odometry, Pipeline, Policy, Relevance, ValidationParams, Validator, Wsm,
+    WsmParams,
 };
 
 /// The robot's pose at scan `k`: along the room, turning slowly.
@@ -943,4 +944,80 @@ fn without_odometry_a_map_weighs_the_velocity_prediction_as_a_looser_prior() {
             assert!(*error < 0.03, "{name}, scan {scan}: {error:.3} m off");
         }
     }
+}
+
+/// Scan `k` of a robot in the corridor, facing its end wall from 4 m before it: standing for
+/// 15 scans, then backing at 0.3 m a scan.
+fn backing(k: usize) -> Pose2 {
+    Pose2::new(8.0 - 0.3 * k.saturating_sub(15) as f64, 0.1, 0.0)
+}
+
+#[test]
+fn new_ground_outside_what_the_map_saw_does_not_lower_the_share() {
+    let world = SyntheticWorld::corridor();
+    let seen_from = backing(0);
+    let mut reference = Reference::new(QuadTree::default());
+    let first = world.scan(&seen_from, 0.005, 1);
+    reference
+        .insert_scan(&first, &seen_from, Some(Merge::spacing(0.01)))
+        .expect("finite");
+    let view = FieldOfView::of(&first, seen_from);
+    let validator = Validator::new(ValidationParams::default());
+    // 2.1 m back, about two thirds of the scan's beams fall on wall beside the robot, behind
+    // where the first scan looked.
+    let now = backing(22);
+    let scan = world.scan(&now, 0.005, 2);
+    let local = scan.points();
+    let every = validator.inlier_share(&reference, local, &now);
+    let seen = validator.seen_share(&reference, local, &now, Some(&view));
+    assert!(every < 0.5, "every point: {every:.2}");
+    assert!(seen > 0.95, "the points the map could have seen: {seen:.2}");
+    // A wrong match still moves points off the surfaces the map holds within the view.
+    for wrong in [
+        now * Pose2::new(0.0, 0.0, 8f64.to_radians()),
+        now * Pose2::new(0.0, 0.4, 0.0),
+    ] {
+        let share = validator.seen_share(&reference, local, &wrong, Some(&view));
+        assert!(share < 0.6, "{wrong:?}: {share:.2}");
+    }
+}
+
+/// Drives `backing` for `scans` scans with odometry read true, the checks at a level
+/// `max_share_drop` below the median: the worst position error (m) and the refusals.
+fn backing_run(skip_unseen: bool, scans: usize) -> (f64, usize) {
+    let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
+    config.validation.max_share_drop = 0.1;
+    config.validation.skip_unseen = skip_unseen;
+    let mut pipeline = config.build().expect("builds");
+    let world = SyntheticWorld::corridor();
+    let (mut worst, mut refused) = (0.0f64, 0);
+    for k in 0..scans {
+        let mut scan = world.scan(&backing(k), 0.005, k as u64 + 1);
+        scan.timestamp = k as f64;
+        let e = pipeline.process(&Record {
+            scan,
+            odometry: backing(k),
+            truth: Some(backing(k)),
+            laser_offset: Pose2::IDENTITY,
+        });
+        refused += usize::from(e.check.refused);
+        worst = worst.max(e.pose.distance(&backing(k)));
+    }
+    (worst, refused)
+}
+
+#[test]
+fn backing_along_a_corridor_is_not_refused_for_the_wall_it_had_not_seen() {
+    // Each step back shows 0.3 m of new wall on either side, where the map has none and the
+    // last inserted scan did not look: counted, it drops the share below a level set while
+    // the robot stood, and right matches are refused (kept out of the map, and searched
+    // again: on Intel played backwards the search then slid them back onto the mapped walls).
+    let (off, refused_off) = backing_run(false, 40);
+    let (on, refused_on) = backing_run(true, 40);
+    assert_eq!(refused_on, 0, "{on:.3} m");
+    assert!(on < 0.02, "{on:.3} m");
+    assert!(
+        refused_off >= 3,
+        "counting every point: {refused_off} refused, {off:.3} m"
+    );
 }
