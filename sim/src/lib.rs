@@ -32,7 +32,7 @@ pub mod world;
 pub use config::{ConfigError, SimConfig, WorldKind};
 pub use metrics::DriveScores;
 pub use sim::{DriveStats, SimError, Simulation};
-pub use world::{Obstacle, World, WorldError};
+pub use world::{Foliage, Obstacle, World, WorldError};
 
 /// A stable 64-bit digest (FNV-1a) of records: timestamps, poses and raw ranges, bit for bit.
 /// The golden determinism test pins it.

@@ -25,6 +25,12 @@ impl Noise {
         lo + (hi - lo) * self.rng.random::<f64>()
     }
 
+    /// Exponential with the given mean (inverse transform).
+    pub fn exponential(&mut self, mean: f64) -> f64 {
+        // 1 − u lies in (0, 1]: the logarithm stays finite.
+        -mean * (1.0 - self.rng.random::<f64>()).ln()
+    }
+
     /// Standard normal (Box–Muller; one spare kept for the next call).
     pub fn gaussian(&mut self) -> f64 {
         if let Some(s) = self.spare.take() {

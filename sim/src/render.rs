@@ -1,7 +1,8 @@
-//! `world.png`: the obstacles, the true path and the odometry path, drawn without fonts.
+//! `world.png`: the obstacles, the foliage, the true path and the odometry path, drawn without
+//! fonts.
 //!
-//! Colours: obstacles black, true path green, odometry path red, start blue; the light grey
-//! grid has 10 m spacing.
+//! Colours: obstacles black, foliage pale green, true path green, odometry path red, start
+//! blue; the light grey grid has 10 m spacing.
 
 use crate::world::World;
 use nalgebra::Point2;
@@ -10,6 +11,8 @@ use std::io::Write;
 
 /// Colour of the obstacles.
 pub const OBSTACLE: [u8; 3] = [20, 20, 20];
+/// Colour of the foliage.
+pub const FOLIAGE: [u8; 3] = [170, 215, 160];
 /// Colour of the true path.
 pub const TRUTH: [u8; 3] = [0, 150, 0];
 /// Colour of the odometry path.
@@ -19,8 +22,8 @@ pub const START: [u8; 3] = [30, 60, 220];
 /// Colour of the 10 m grid.
 pub const GRID: [u8; 3] = [225, 225, 225];
 /// What the colours mean, for summaries and READMEs.
-pub const LEGEND: &str = "black: obstacles, green: true path, red: odometry path, \
-blue dot: start, grey grid: 10 m";
+pub const LEGEND: &str = "black: obstacles, pale green: foliage, green: true path, \
+red: odometry path, blue dot: start, grey grid: 10 m";
 
 /// An RGB raster with a world-to-pixel mapping.
 #[derive(Debug, Clone)]
@@ -131,9 +134,16 @@ pub fn write_png<W: Write>(
         gy += 10.0;
     }
 
-    // Obstacles: every pixel within half a pixel of an obstacle's inside, so thin walls show.
+    // Obstacles: every pixel within half a pixel of an obstacle's inside, so thin walls show;
+    // foliage first, under them.
     let half_px = 0.5 / canvas.scale;
-    for o in &world.obstacles {
+    let outlines: Vec<_> = world
+        .foliage
+        .iter()
+        .map(|f| (f.outline(), FOLIAGE))
+        .collect();
+    let solids = world.obstacles.iter().map(|o| (*o, OBSTACLE));
+    for (o, colour) in outlines.into_iter().chain(solids) {
         let c = o.center();
         let r = o.bounding_radius() + half_px;
         let (x0, y0) = canvas.to_px(&Point2::new(c.x - r, c.y + r));
@@ -142,7 +152,7 @@ pub fn write_png<W: Write>(
             for x in x0.floor() as i64..=x1.ceil() as i64 {
                 let p = canvas.to_world(x as f64 + 0.5, y as f64 + 0.5);
                 if o.signed_distance(&p) <= half_px {
-                    canvas.put(x, y, OBSTACLE);
+                    canvas.put(x, y, colour);
                 }
             }
         }

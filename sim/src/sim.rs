@@ -79,6 +79,8 @@ pub struct Simulation {
     odometry: Pose2,
     target: usize,
     laser_noise: Noise,
+    /// Where a beam returns inside foliage (drawn only for beams that enter a stand).
+    foliage_noise: Noise,
     encoder_noise: Noise,
     stats: DriveStats,
     done: bool,
@@ -163,6 +165,7 @@ impl Simulation {
             odometry: start,
             target: 1,
             laser_noise: Noise::new(seed, 0x6c61736572),
+            foliage_noise: Noise::new(seed, 0x666f6c69616765),
             encoder_noise: Noise::new(seed, 0x656e636f646572),
             stats: DriveStats {
                 min_clearance_m: f64::INFINITY,
@@ -219,7 +222,8 @@ impl Simulation {
     }
 
     /// The noise-free range along one ray from `origin` at world bearing `angle`: the distance
-    /// to the first static obstacle, or `None` when nothing lies within `max_range`.
+    /// to the first static obstacle, or `None` when nothing lies within `max_range`. Foliage,
+    /// which returns a beam at a random depth, is not seen here ([`Self::scan_now`] sees it).
     #[must_use]
     pub fn cast_ray(&self, origin: (f64, f64), angle: f64, max_range: f64) -> Option<f64> {
         let q = self
@@ -231,7 +235,9 @@ impl Simulation {
             .map(|(_, toi)| toi as f64)
     }
 
-    /// One sweep of the laser from the robot's current true pose (noise included).
+    /// One sweep of the laser from the robot's current true pose (noise included): each beam
+    /// returns from the first solid surface or from a leaf inside foliage in front of it
+    /// ([`crate::Foliage`]).
     pub fn scan_now(&mut self) -> Result<Scan, SimError> {
         let laser = self.true_pose() * Pose2::new(self.cfg.laser.offset_x, 0.0, 0.0);
         let g = self.geometry;
@@ -244,9 +250,33 @@ impl Simulation {
         for i in 0..self.cfg.laser.beams {
             let (s, c) = (laser.theta + g.angle(i)).sin_cos();
             let ray = Ray::new(origin, vec2(c, s));
-            let r = match q.cast_ray(&ray, g.max_range as Real, true) {
-                Some((_, toi)) => {
-                    let noisy = toi as f64 + sigma * self.laser_noise.gaussian();
+            let solid = q
+                .cast_ray(&ray, g.max_range as Real, true)
+                .map(|(_, toi)| toi as f64);
+            // Foliage in front of the first solid surface may return the beam first: each
+            // stand crossed draws its leaf's distance from its own stream, so a world without
+            // foliage draws nothing and scans as it did.
+            let mut hit = solid;
+            for f in &self.world.foliage {
+                let reach = hit.unwrap_or(g.max_range);
+                let Some((t_in, t_out)) = f.crossing(
+                    &nalgebra::Point2::new(laser.x, laser.y),
+                    &nalgebra::Vector2::new(c, s),
+                ) else {
+                    continue;
+                };
+                if t_in >= reach {
+                    continue;
+                }
+                let depth = self.foliage_noise.exponential(f.mean_free_path);
+                let t = t_in + depth;
+                if t < t_out && t < reach {
+                    hit = Some(t);
+                }
+            }
+            let r = match hit {
+                Some(toi) => {
+                    let noisy = toi + sigma * self.laser_noise.gaussian();
                     noisy.clamp(0.0, g.max_range)
                 }
                 // No return: report max_range itself, which readers mark as invalid.

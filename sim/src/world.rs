@@ -1,5 +1,6 @@
-//! World geometry: obstacles (circles and rotated rectangles; walls are thin rectangles) and the
-//! route through them, built from a [`SimConfig`] — procedurally for `park` and `corridor`.
+//! World geometry: obstacles (circles and rotated rectangles; walls are thin rectangles),
+//! foliage the laser sees into, and the route through them, built from a [`SimConfig`] —
+//! procedurally for `park` and `corridor`.
 //!
 //! The same geometry feeds rapier (static colliders), the drawing of `world.png` and the exact
 //! signed distance used by the tests.
@@ -119,8 +120,9 @@ impl Obstacle {
         }
     }
 
-    fn from_config(o: &ObstacleConfig) -> Self {
-        match *o {
+    /// The solid obstacle `o` describes; `None` for foliage ([`Foliage::from_config`]).
+    fn from_config(o: &ObstacleConfig) -> Option<Self> {
+        Some(match *o {
             ObstacleConfig::Circle { center, radius } => Obstacle::Circle {
                 center: Point2::new(center[0], center[1]),
                 radius,
@@ -137,6 +139,80 @@ impl Obstacle {
             ObstacleConfig::Wall { a, b, thickness } => {
                 Obstacle::wall(Point2::new(a[0], a[1]), Point2::new(b[0], b[1]), thickness)
             }
+            ObstacleConfig::Foliage { .. } => return None,
+        })
+    }
+}
+
+/// A stand of foliage (`kind = "foliage"` in `[[world.obstacles]]`): a rotated rectangle the
+/// laser sees into, one leaf at a time. A beam that enters it returns after a distance drawn
+/// from an exponential distribution of mean `mean_free_path`, or passes on where it leaves the
+/// stand first (a Poisson process of leaves along the beam). It is no collider: the robot
+/// drives through it, and the route should not.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Foliage {
+    /// Centre (m).
+    pub center: Point2<f64>,
+    /// Half extents along the stand's own axes (m).
+    pub half: Vector2<f64>,
+    /// Rotation (rad, counter-clockwise).
+    pub angle: f64,
+    /// Mean distance a beam travels inside before it returns (m).
+    pub mean_free_path: f64,
+}
+
+impl Foliage {
+    /// Where the ray from `origin` along the unit vector `dir` runs inside the stand: the
+    /// distances at which it enters (0 when it starts inside) and leaves, or `None` when it
+    /// misses it or has it behind.
+    #[must_use]
+    pub fn crossing(&self, origin: &Point2<f64>, dir: &Vector2<f64>) -> Option<(f64, f64)> {
+        let (s, c) = self.angle.sin_cos();
+        // Origin and direction in the stand's own frame (slab test per axis).
+        let d = origin - self.center;
+        let o = [c * d.x + s * d.y, -s * d.x + c * d.y];
+        let v = [c * dir.x + s * dir.y, -s * dir.x + c * dir.y];
+        let half = [self.half.x, self.half.y];
+        let (mut t_in, mut t_out) = (0.0_f64, f64::INFINITY);
+        for k in 0..2 {
+            if v[k] == 0.0 {
+                if o[k].abs() > half[k] {
+                    return None;
+                }
+                continue;
+            }
+            let (a, b) = ((-half[k] - o[k]) / v[k], (half[k] - o[k]) / v[k]);
+            t_in = t_in.max(a.min(b));
+            t_out = t_out.min(a.max(b));
+        }
+        (t_in < t_out).then_some((t_in, t_out))
+    }
+
+    /// The stand `o` describes; `None` for a solid obstacle.
+    fn from_config(o: &ObstacleConfig) -> Option<Self> {
+        match *o {
+            ObstacleConfig::Foliage {
+                center,
+                half_size,
+                angle_deg,
+                mean_free_path,
+            } => Some(Foliage {
+                center: Point2::new(center[0], center[1]),
+                half: Vector2::new(half_size[0], half_size[1]),
+                angle: angle_deg.to_radians(),
+                mean_free_path,
+            }),
+            _ => None,
+        }
+    }
+
+    /// The stand's outline as a rectangle, for drawing and bounds.
+    #[must_use]
+    pub fn outline(&self) -> Obstacle {
+        Obstacle::Rect {
+            center: self.center,
+            half: self.half,
+            angle: self.angle,
         }
     }
 }
@@ -148,6 +224,8 @@ pub struct World {
     pub kind: WorldKind,
     /// Every static obstacle.
     pub obstacles: Vec<Obstacle>,
+    /// Foliage the laser sees into ([`Foliage`]); no obstacle to the robot.
+    pub foliage: Vec<Foliage>,
     /// Waypoints of the route; the robot starts on the first, facing the second.
     pub route: Vec<Point2<f64>>,
     /// Lower-left and upper-right corners of the area of interest (for drawing).
@@ -164,18 +242,25 @@ impl World {
             WorldKind::Custom => World {
                 kind: WorldKind::Custom,
                 obstacles: Vec::new(),
+                foliage: Vec::new(),
                 route: Vec::new(),
                 bounds: (Point2::origin(), Point2::origin()),
             },
         };
         world
             .obstacles
-            .extend(cfg.world.obstacles.iter().map(Obstacle::from_config));
+            .extend(cfg.world.obstacles.iter().filter_map(Obstacle::from_config));
+        world
+            .foliage
+            .extend(cfg.world.obstacles.iter().filter_map(Foliage::from_config));
         if let Some(w) = &cfg.drive.waypoints {
             world.route = w.iter().map(|p| Point2::new(p[0], p[1])).collect();
         }
         if world.kind == WorldKind::Custom {
-            world.bounds = bounding_box(&world.obstacles, &world.route, 2.0);
+            let outlines: Vec<Obstacle> = (world.obstacles.iter().copied())
+                .chain(world.foliage.iter().map(Foliage::outline))
+                .collect();
+            world.bounds = bounding_box(&outlines, &world.route, 2.0);
         }
         Ok(world)
     }
@@ -327,9 +412,36 @@ fn park(p: &ParkConfig, seed: u64, robot_radius: f64) -> Result<World, WorldErro
             angle: rng.uniform(0.0, std::f64::consts::PI),
         }
     })?;
+    // Hedges last, so that a park without them is laid out as before. They are placed as
+    // their outlines, clear of the route and of everything else, then become foliage.
+    let solids = obstacles.len();
+    place(&mut obstacles, "hedges", p.hedges, &mut |rng, c| {
+        Obstacle::Rect {
+            center: c,
+            half: Vector2::new(rng.uniform(1.5, 5.0), rng.uniform(0.5, 1.0)),
+            angle: rng.uniform(0.0, std::f64::consts::PI),
+        }
+    })?;
+    let foliage = obstacles
+        .drain(solids..)
+        .filter_map(|o| match o {
+            Obstacle::Rect {
+                center,
+                half,
+                angle,
+            } => Some(Foliage {
+                center,
+                half,
+                angle,
+                mean_free_path: p.hedge_mean_free_path,
+            }),
+            Obstacle::Circle { .. } => None,
+        })
+        .collect();
     Ok(World {
         kind: WorldKind::Park,
         obstacles,
+        foliage,
         route,
         bounds: (Point2::origin(), Point2::new(w, h)),
     })
@@ -417,6 +529,7 @@ fn corridor(c: &CorridorConfig) -> World {
     World {
         kind: WorldKind::Corridor,
         obstacles,
+        foliage: Vec::new(),
         route,
         bounds: (Point2::origin(), Point2::new(w, h)),
     }

@@ -162,3 +162,21 @@ fn values_that_crashed_or_hung_the_simulator_are_refused_by_key() {
         SimConfig::from_toml_str(&text).unwrap_or_else(|e| panic!("{text}: {e}"));
     }
 }
+
+#[test]
+fn foliage_without_a_positive_mean_free_path_is_refused_by_key() {
+    for mfp in ["0.0", "-0.3", "nan", "inf"] {
+        let text = format!(
+            "[world]\nkind = \"custom\"\n[[world.obstacles]]\nkind = \"foliage\"\n\
+             center = [3.0, 0.0]\nhalf_size = [1.0, 1.0]\nmean_free_path = {mfp}\n\
+             [drive]\nwaypoints = [[0.0, 0.0], [1.0, 0.0]]\n"
+        );
+        assert_eq!(invalid_key(&text), "world.obstacles", "{mfp}");
+        assert!(refused(&text).contains("mean_free_path"), "{mfp}");
+        assert_eq!(
+            invalid_key(&format!("[world.park]\nhedge_mean_free_path = {mfp}\n")),
+            "world.park.hedge_mean_free_path",
+            "{mfp}"
+        );
+    }
+}

@@ -63,6 +63,7 @@ impl SimConfig {
                 format!("is [{r0}, {r1}]: needs 0 < min <= max"),
             );
         }
+        positive("world.park.hedge_mean_free_path", p.hedge_mean_free_path)?;
         non_negative("world.park.route_clearance", p.route_clearance)?;
         non_negative("world.park.route_wiggle", p.route_wiggle)?;
         positive("world.park.route_margin", p.route_margin)?;
@@ -269,6 +270,31 @@ fn validate_obstacle(o: &ObstacleConfig) -> Result<(), ConfigError> {
                 || !half_size.iter().all(|h| h.is_finite() && *h > 0.0)
             {
                 return invalid(key, "has a box with bad centre, half_size or angle".into());
+            }
+        }
+        ObstacleConfig::Foliage {
+            center,
+            half_size,
+            angle_deg,
+            mean_free_path,
+        } => {
+            if !finite(center)
+                || !finite(&[*angle_deg])
+                || !half_size.iter().all(|h| h.is_finite() && *h > 0.0)
+            {
+                return invalid(
+                    key,
+                    "has foliage with bad centre, half_size or angle".into(),
+                );
+            }
+            if !(mean_free_path.is_finite() && *mean_free_path > 0.0) {
+                return invalid(
+                    key,
+                    format!(
+                        "has foliage with mean_free_path {}: must be finite and positive",
+                        num(*mean_free_path)
+                    ),
+                );
             }
         }
         ObstacleConfig::Wall { a, b, thickness } => {

@@ -71,6 +71,11 @@ pub struct ParkConfig {
     pub rocks: usize,
     /// Number of benches (1.6 × 0.5 m boxes). Default 2.
     pub benches: usize,
+    /// Number of hedges: stands of foliage 3-10 m long and 1-2 m deep, turned at random,
+    /// which the laser sees into ([`ObstacleConfig::Foliage`]). Default 0.
+    pub hedges: usize,
+    /// Mean distance a beam travels into a hedge before it returns (m). Default 0.3.
+    pub hedge_mean_free_path: f64,
     /// Smallest free distance between the route and any obstacle surface (m). Default 2.5.
     pub route_clearance: f64,
     /// Distance of the loop from the park's edge (m). Default 6.
@@ -87,6 +92,8 @@ impl Default for ParkConfig {
             tree_radius: [0.15, 0.5],
             rocks: 3,
             benches: 2,
+            hedges: 0,
+            hedge_mean_free_path: 0.3,
             route_clearance: 2.5,
             route_margin: 6.0,
             route_wiggle: 3.0,
@@ -157,6 +164,22 @@ pub enum ObstacleConfig {
         /// Rotation (degrees, counter-clockwise).
         #[serde(default)]
         angle_deg: f64,
+    },
+    /// A stand of foliage (a hedge, a bush): a rectangle, rotated by `angle_deg` about its
+    /// centre, that the laser sees into. A beam that enters it returns after a distance drawn
+    /// from an exponential distribution of mean `mean_free_path` (m), or passes on when it
+    /// leaves the stand first, so the leaves return another surface at every scan. It stops
+    /// no robot: keep the route out of it.
+    Foliage {
+        /// Centre (m).
+        center: [f64; 2],
+        /// Half width and half height (m).
+        half_size: [f64; 2],
+        /// Rotation (degrees, counter-clockwise).
+        #[serde(default)]
+        angle_deg: f64,
+        /// Mean distance a beam travels inside the stand before it returns (m).
+        mean_free_path: f64,
     },
     /// A straight wall from `a` to `b` (its centre line) of the given thickness.
     Wall {
