@@ -265,10 +265,7 @@ fn validate_obstacle(o: &ObstacleConfig) -> Result<(), ConfigError> {
             half_size,
             angle_deg,
         } => {
-            if !finite(center)
-                || !finite(&[*angle_deg])
-                || !half_size.iter().all(|h| h.is_finite() && *h > 0.0)
-            {
+            if !rectangle(center, half_size, *angle_deg) {
                 return invalid(key, "has a box with bad centre, half_size or angle".into());
             }
         }
@@ -278,10 +275,7 @@ fn validate_obstacle(o: &ObstacleConfig) -> Result<(), ConfigError> {
             angle_deg,
             mean_free_path,
         } => {
-            if !finite(center)
-                || !finite(&[*angle_deg])
-                || !half_size.iter().all(|h| h.is_finite() && *h > 0.0)
-            {
+            if !rectangle(center, half_size, *angle_deg) {
                 return invalid(
                     key,
                     "has foliage with bad centre, half_size or angle".into(),
@@ -304,6 +298,13 @@ fn validate_obstacle(o: &ObstacleConfig) -> Result<(), ConfigError> {
         }
     }
     Ok(())
+}
+
+/// A rotated rectangle's centre and angle are finite and its half sizes finite and positive.
+fn rectangle(center: &[f64; 2], half_size: &[f64; 2], angle_deg: f64) -> bool {
+    center.iter().all(|x| x.is_finite())
+        && angle_deg.is_finite()
+        && half_size.iter().all(|h| h.is_finite() && *h > 0.0)
 }
 
 fn invalid(key: &'static str, why: String) -> Result<(), ConfigError> {
