@@ -137,13 +137,9 @@ pub fn write_png<W: Write>(
     // Obstacles: every pixel within half a pixel of an obstacle's inside, so thin walls show;
     // foliage first, under them.
     let half_px = 0.5 / canvas.scale;
-    let outlines: Vec<_> = world
-        .foliage
-        .iter()
-        .map(|f| (f.outline(), FOLIAGE))
-        .collect();
+    let foliage = world.foliage.iter().map(|f| (f.outline(), FOLIAGE));
     let solids = world.obstacles.iter().map(|o| (*o, OBSTACLE));
-    for (o, colour) in outlines.into_iter().chain(solids) {
+    for (o, colour) in foliage.chain(solids) {
         let c = o.center();
         let r = o.bounding_radius() + half_px;
         let (x0, y0) = canvas.to_px(&Point2::new(c.x - r, c.y + r));

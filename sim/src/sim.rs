@@ -246,6 +246,7 @@ impl Simulation {
             .physics
             .query_pipeline_with_filter(QueryFilter::only_fixed());
         let origin = vec2(laser.x, laser.y);
+        let at = nalgebra::Point2::new(laser.x, laser.y);
         let mut ranges = Vec::with_capacity(self.cfg.laser.beams);
         for i in 0..self.cfg.laser.beams {
             let (s, c) = (laser.theta + g.angle(i)).sin_cos();
@@ -259,10 +260,7 @@ impl Simulation {
             let mut hit = solid;
             for f in &self.world.foliage {
                 let reach = hit.unwrap_or(g.max_range);
-                let Some((t_in, t_out)) = f.crossing(
-                    &nalgebra::Point2::new(laser.x, laser.y),
-                    &nalgebra::Vector2::new(c, s),
-                ) else {
+                let Some((t_in, t_out)) = f.crossing(&at, &nalgebra::Vector2::new(c, s)) else {
                     continue;
                 };
                 if t_in >= reach {
