@@ -255,13 +255,13 @@ impl Merge {
     /// millimetre, so the cell coordinates fit an `i64`; a narrower cell given through this
     /// API saturates the cast (cells far out alias) rather than panicking.
     fn cell(&self, p: &Point2<f64>) -> Option<(i64, i64)> {
-        (self.max_cell_points > 0 && self.cell_size > 0.0).then(|| {
-            (
-                (p.x / self.cell_size).floor() as i64,
-                (p.y / self.cell_size).floor() as i64,
-            )
-        })
+        (self.max_cell_points > 0 && self.cell_size > 0.0).then(|| cell_of(p, self.cell_size))
     }
+}
+
+/// The square cell of side `side` holding `p` ([`Merge::cell`]).
+fn cell_of(p: &Point2<f64>, side: f64) -> (i64, i64) {
+    ((p.x / side).floor() as i64, (p.y / side).floor() as i64)
 }
 
 /// A spatial index of reference points with a [`PointInfo`] per point.
@@ -277,6 +277,10 @@ pub struct Reference<I> {
     /// Per point: the number of the scan that inserted it or last landed on its surface
     /// ([`FullCell::EvictStalest`]).
     confirmed: Vec<u32>,
+    /// Per point: the number of the scan that inserted it ([`Reference::deform`]).
+    born: Vec<u32>,
+    /// The side of the cell cap's cells, once a merge used them (m).
+    cell_size: f64,
     /// Per point: false once a full cell replaced it; it leaves the index at the next rebuild.
     live: Vec<bool>,
     /// Points replaced and still in the index.
@@ -312,6 +316,8 @@ impl<I: SpatialIndex> Reference<I> {
             merged: false,
             cells: HashMap::new(),
             confirmed: Vec::new(),
+            born: Vec::new(),
+            cell_size: 0.0,
             live: Vec::new(),
             stale: 0,
             looks: Vec::new(),
@@ -383,6 +389,13 @@ impl<I: SpatialIndex> Reference<I> {
         self.info.is_empty()
     }
 
+    /// Per point, by id: the number of the scan that inserted it (as [`Reference::scans`]
+    /// counted before that insertion).
+    #[must_use]
+    pub fn born(&self) -> &[u32] {
+        &self.born
+    }
+
     /// Number of scans inserted since the last clear.
     #[must_use]
     pub fn scans(&self) -> usize {
@@ -436,6 +449,7 @@ impl<I: SpatialIndex> Reference<I> {
         self.merged = false;
         self.cells.clear();
         self.confirmed.clear();
+        self.born.clear();
         self.live.clear();
         self.stale = 0;
         self.looks.clear();
@@ -477,6 +491,11 @@ impl<I: SpatialIndex> Reference<I> {
         {
             // The index cannot take the carved points out of its searches itself.
             self.rebuild()?;
+        }
+        if let Some(m) = merge
+            && m.max_cell_points > 0
+        {
+            self.cell_size = m.cell_size;
         }
         let held = self.index.len();
         // This scan's number, for the points it inserts or confirms.
@@ -536,6 +555,7 @@ impl<I: SpatialIndex> Reference<I> {
             }
             self.info.push(info);
             self.confirmed.push(stamp);
+            self.born.push(stamp);
             self.live.push(true);
             self.looks.push((1, 0));
             inserted += 1;
@@ -655,6 +675,49 @@ impl<I: SpatialIndex> Reference<I> {
         true
     }
 
+    /// Moves every point by the pose `moved` gives for the number of the scan that inserted
+    /// it (as [`Reference::scans`] counted before that insertion; `None` leaves the scan's
+    /// points where they are), turning its normal and covariance with it: a stretch of map
+    /// laid by drifted scans is laid again where they belong ([`crate::SpatialIndex`] rebuilt,
+    /// cells of the cell cap re-bucketed). Points replaced by a full cell or carved are dropped
+    /// on the way ([`Reference::renumberings`] counts that); otherwise every point keeps its
+    /// id. On error (a point moved out of the index's range) the map is left empty.
+    pub fn deform(&mut self, moved: impl Fn(u32) -> Option<Pose2>) -> Result<(), IndexError> {
+        let mut points = self.index.points().to_vec();
+        for ((p, info), born) in points.iter_mut().zip(&mut self.info).zip(&self.born) {
+            let Some(by) = moved(*born) else { continue };
+            let rot = by.rotation();
+            *p = by.transform_point(p);
+            info.normal = rot * info.normal;
+            info.covariance = rot * info.covariance * rot.transpose();
+        }
+        self.index.clear();
+        for p in &points {
+            if let Err(e) = self.index.insert(*p) {
+                self.clear();
+                return Err(e);
+            }
+        }
+        if self.stale > 0
+            && let Err(e) = self.rebuild()
+        {
+            self.clear();
+            return Err(e);
+        }
+        if !self.cells.is_empty() {
+            self.cells.clear();
+            for (id, p) in self.index.points().iter().enumerate() {
+                // After the rebuild every point is live.
+                let id = id as PointId;
+                self.cells
+                    .entry(cell_of(p, self.cell_size))
+                    .or_default()
+                    .push(id);
+            }
+        }
+        Ok(())
+    }
+
     /// Drops the replaced points from the index: the live ones are inserted afresh, in their
     /// order (ids change; nothing outside holds them between scans).
     fn rebuild(&mut self) -> Result<(), IndexError> {
@@ -670,11 +733,13 @@ impl<I: SpatialIndex> Reference<I> {
             id_of[old] = self.index.insert(*p)?;
             self.info[k] = self.info[old];
             self.confirmed[k] = self.confirmed[old];
+            self.born[k] = self.born[old];
             self.looks[k] = self.looks[old];
             k += 1;
         }
         self.info.truncate(k);
         self.confirmed.truncate(k);
+        self.born.truncate(k);
         self.looks.truncate(k);
         self.live.clear();
         self.live.resize(k, true);

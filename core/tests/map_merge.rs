@@ -505,3 +505,99 @@ fn a_rebuild_that_drops_replaced_points_is_counted_as_a_renumbering() {
     map.clear();
     assert_eq!(map.renumberings(), counted + 1);
 }
+
+/// The room laid twice: scans 0-4 at their poses, scans 5-9 `drift` off (a stretch laid by
+/// a drifted estimate), capped at `cap` points per 0.1 m cell (0: no cap).
+fn laid_twice<I: SpatialIndex>(index: I, drift: Pose2, cap: u32) -> (Reference<I>, Vec<Pose2>) {
+    let world = SyntheticWorld::room();
+    let merge = Merge {
+        max_cell_points: cap,
+        cell_size: 0.1,
+        ..Merge::spacing(0.01)
+    };
+    let mut map = Reference::new(index);
+    let mut truth = Vec::new();
+    for k in 0..10 {
+        let pose = Pose2::new(-1.0 + 0.2 * k as f64, 0.1 * k as f64, 0.15 * k as f64);
+        let laid = if k < 5 { pose } else { drift * pose };
+        map.insert_scan(&world.scan(&pose, 0.005, k as u64 + 1), &laid, Some(merge))
+            .expect("finite points");
+        truth.push(pose);
+    }
+    (map, truth)
+}
+
+#[test]
+fn a_deformed_map_moves_each_scans_points_with_the_scan_and_keeps_its_ids() {
+    let drift = Pose2::new(0.4, -0.25, 2f64.to_radians());
+    // Without a cap no point is stale, so none is dropped on the way.
+    let (mut map, _) = laid_twice(QuadTree::default(), drift, 0);
+    assert_eq!(map.stale_len(), 0);
+    let before = map.index().points().to_vec();
+    let info = map.info().to_vec();
+    let renumberings = map.renumberings();
+    // Scans 5-9 move back by the drift; scans 0-4 stay.
+    let back = drift.inverse();
+    map.deform(|scan| (scan >= 5).then_some(back))
+        .expect("finite points");
+    let after = map.index().points();
+    assert_eq!(after.len(), before.len(), "no point lost");
+    assert_eq!(map.renumberings(), renumberings, "ids kept");
+    // Each point stayed, or moved by the drift's inverse and turned its normal with it.
+    let mut moved = 0;
+    for (id, (p, q)) in before.iter().zip(after).enumerate() {
+        let (expected, normal) = if (p - q).norm() > 1e-12 {
+            moved += 1;
+            (back.transform_point(p), back.rotation() * info[id].normal)
+        } else {
+            (*p, info[id].normal)
+        };
+        assert!((q - expected).norm() < 1e-9, "point {id}");
+        assert!((map.info()[id].normal - normal).norm() < 1e-9, "point {id}");
+    }
+    assert!(moved > 100, "the drifted scans' points moved ({moved})");
+    // The index answers from the moved points: the same nearest as a linear search.
+    let mut rng = SplitMix::new(11);
+    for _ in 0..200 {
+        let p = Point2::new(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0));
+        let brute = after
+            .iter()
+            .map(|q| (q - p).norm_squared())
+            .fold(f64::INFINITY, f64::min);
+        let found = map.index().nearest_within(&p, 100.0).expect("a point");
+        assert!((found.dist_sq - brute).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn a_deformed_map_holds_one_copy_of_the_walls_and_its_cells_their_cap() {
+    let drift = Pose2::new(0.4, -0.25, 2f64.to_radians());
+    let world = SyntheticWorld::room();
+    let off = |map: &Reference<QuadTree>| {
+        map.live_points()
+            .iter()
+            .filter(|p| distance_to_world(&world, p) > 0.05)
+            .count()
+    };
+    let (mut map, truth) = laid_twice(QuadTree::default(), drift, 4);
+    assert!(off(&map) > 100, "the drifted copy lies off the walls");
+    map.deform(|scan| (scan >= 5).then_some(drift.inverse()))
+        .expect("finite points");
+    assert_eq!(off(&map), 0, "every point back on a wall");
+    // Scans laid after the deformation still fill cells only up to the cap.
+    let merge = Merge {
+        max_cell_points: 4,
+        cell_size: 0.1,
+        ..Merge::spacing(0.01)
+    };
+    for (k, pose) in truth.iter().enumerate() {
+        map.insert_scan(&world.scan(pose, 0.005, 100 + k as u64), pose, Some(merge))
+            .expect("finite points");
+    }
+    let counts = cell_counts(&map.live_points(), 0.1);
+    assert!(
+        counts.values().all(|&n| n <= 4),
+        "{:?}",
+        counts.values().max()
+    );
+}
