@@ -108,6 +108,10 @@ pub struct RelationProbe {
     times: Vec<f64>,
     /// Best pose so far for each time.
     best: Vec<Option<Stamped>>,
+    /// The number of the push that gave each best pose (counted from 0).
+    pushed_as: Vec<usize>,
+    /// Poses offered so far.
+    pushed: usize,
     max_dt: f64,
 }
 
@@ -120,6 +124,8 @@ impl RelationProbe {
         times.dedup();
         Ok(Self {
             best: vec![None; times.len()],
+            pushed_as: vec![0; times.len()],
+            pushed: 0,
             times,
             max_dt,
         })
@@ -152,9 +158,24 @@ impl RelationProbe {
             };
             if better {
                 self.best[i] = Some((t, pose));
+                self.pushed_as[i] = self.pushed;
             }
         }
+        self.pushed += 1;
         Ok(())
+    }
+
+    /// Moves the poses held: the pose the `k`-th push gave (counted from 0) is moved on the
+    /// left (in the world) by `moved(k)`, where it gives one. For a trajectory corrected
+    /// after the fact (a matcher's re-anchoring spread over the records before it).
+    pub fn amend(&mut self, moved: impl Fn(usize) -> Option<Pose2>) {
+        for (best, &k) in self.best.iter_mut().zip(&self.pushed_as) {
+            if let Some((_, pose)) = best
+                && let Some(by) = moved(k)
+            {
+                *pose = by * *pose;
+            }
+        }
     }
 
     /// Whether every relation time lies more than the probe's `max_dt` before `t`: a
