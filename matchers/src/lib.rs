@@ -49,6 +49,7 @@ pub mod policy;
 pub mod registry;
 pub mod revisit;
 mod steering;
+pub mod trail;
 pub mod validation;
 pub mod wsm;
 

@@ -7,6 +7,7 @@ use crate::correlative::{CorrelativeParams, CorrelativeSearch};
 use crate::icp::non_negative;
 use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 use crate::revisit::{Revisit, RevisitParams};
+use crate::trail::{Amendment, Trail, moves_fit};
 use crate::validation::{Check, FieldOfView, Fit, ValidationParams, Validator, is_poor};
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
@@ -385,6 +386,12 @@ pub trait Odometry: Send + std::fmt::Debug {
     fn live_points(&self) -> Vec<Point2<f64>> {
         self.reference_points().to_vec()
     }
+    /// A correction of earlier records' poses that the last [`Odometry::process`] made, once
+    /// ([`RevisitParams::deform`]): a trajectory kept by the caller should take it. None by
+    /// default.
+    fn take_amendment(&mut self) -> Option<Amendment> {
+        None
+    }
 }
 
 /// The built-in reference policies, for [`Pipeline::new`] (any [`ReferencePolicy`] will do).
@@ -505,6 +512,10 @@ pub struct Pipeline<M, I> {
     revisit: Revisit,
     /// The reference's [`renumberings`](Reference::renumberings) the look-ups know of.
     renumberings: u64,
+    /// The records and the scans of the map, for spreading a re-anchoring's correction.
+    trail: Trail,
+    /// The latest spread correction not yet taken ([`Odometry::take_amendment`]).
+    amendment: Option<Amendment>,
     search: CorrelativeSearch,
     /// Odometry's scale and drift, fitted to the accepted matches.
     calibration: OdometryCalibration,
@@ -544,6 +555,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             search: CorrelativeSearch::new(CorrelativeParams::default()),
             revisit: Revisit::new(RevisitParams::default()),
             renumberings: 0,
+            trail: Trail::new(RevisitParams::default().age_scans),
+            amendment: None,
             first_reading: None,
             odometry_moved: false,
             calibration: OdometryCalibration::default(),
@@ -567,6 +580,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     #[must_use]
     pub fn with_revisit(mut self, revisit: RevisitParams) -> Self {
         self.revisit = Revisit::new(revisit);
+        self.trail = Trail::new(revisit.age_scans);
         self
     }
 
@@ -700,6 +714,36 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         true
     }
 
+    /// Spreads a re-anchoring's `correction` (in the world) over the stretch of map and
+    /// trajectory that drifted, where the moved stretch fits the old map better
+    /// ([`crate::trail`]); otherwise the correction stays a jump.
+    fn deform(&mut self, correction: Pose2) {
+        let Some(amendment) = self.trail.amendment(correction) else {
+            return;
+        };
+        let moves = self.trail.scan_moves(&amendment);
+        if !moves_fit(&self.reference, &moves) {
+            return;
+        }
+        if self
+            .reference
+            .deform(|stamp| moves.get(&stamp).copied())
+            .is_err()
+        {
+            // A point moved out of the index's range: the map is empty and starts afresh.
+            self.trail.cleared();
+            self.view = None;
+            return;
+        }
+        // The last scan in the map saw from where it now lies.
+        if let Some(view) = &mut self.view {
+            let last = self.trail.last_scan_record().unwrap_or(amendment.first);
+            *view = view.moved(&amendment.partial(last.saturating_sub(amendment.first)));
+        }
+        self.trail.anchored();
+        self.amendment = Some(amendment);
+    }
+
     fn update_reference(&mut self, record: &Record, laser: &Pose2, result: &MatchResult) -> bool {
         let matched = Matched {
             scan: &record.scan,
@@ -793,6 +837,9 @@ where
             && self.validator.params.enabled
             && result.fallback.is_none()
             && self.reanchor(&record.scan, &mut result);
+        if check.reanchored && self.revisit.params().deform {
+            self.deform((self.reference_frame * result.pose) * matched.inverse());
+        }
         // A refused match stays out of a map, and so does one that odometry contradicts
         // until a match agrees again. A scan-to-scan reference is replaced all the same: there
         // is no map to protect, and an older reference overlaps less.
@@ -816,6 +863,7 @@ where
             }
         }
         let laser = self.reference_frame * result.pose;
+        self.trail.record(&laser);
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
         if inserted {
@@ -830,6 +878,12 @@ where
         }
         if inserted && boosted {
             self.revisit.inserted(self.reference.index().len());
+            let scans = self.reference.scans();
+            if scans == 1 {
+                self.trail.cleared();
+            }
+            let stamp = u32::try_from(scans - 1).unwrap_or(u32::MAX);
+            self.trail.inserted(stamp, &laser);
         }
         if let Some(before) = base
             && result.fallback.is_none()
@@ -865,6 +919,10 @@ where
 
     fn live_points(&self) -> Vec<Point2<f64>> {
         self.reference.live_points()
+    }
+
+    fn take_amendment(&mut self) -> Option<Amendment> {
+        self.amendment.take()
     }
 }
 

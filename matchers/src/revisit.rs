@@ -74,6 +74,13 @@ pub struct RevisitParams {
     /// starts the count again. Default 8: two agreeing look-ups at most 45 matched scans
     /// apart at `every` = 5; 0 asks for look-ups strictly in a row.
     pub confirm_gap: usize,
+    /// Spread a re-anchoring's correction over the stretch that drifted ([`crate::trail`]):
+    /// the map's points laid since the robot left old ground move with it, by the path
+    /// driven, and so do the poses of those records
+    /// ([`Odometry::take_amendment`](crate::pipeline::Odometry::take_amendment)), where the
+    /// moved stretch then lies nearer the old map. False leaves the drifted stretch where it
+    /// was laid, and the estimate jumps.
+    pub deform: bool,
 }
 
 /// Two look-ups' corrections agree when, applied to the same match, they differ by less
@@ -94,6 +101,7 @@ impl Default for RevisitParams {
             window_deg: 3.0,
             confirmations: 2,
             confirm_gap: 8,
+            deform: false,
         }
     }
 }

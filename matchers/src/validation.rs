@@ -265,6 +265,15 @@ impl FieldOfView {
         }
     }
 
+    /// The same view from a laser moved by `by` (on the left, in the reference frame).
+    #[must_use]
+    pub fn moved(&self, by: &Pose2) -> Self {
+        Self {
+            to_laser: self.to_laser * by.inverse(),
+            ..*self
+        }
+    }
+
     /// True where `p` (reference frame) lies at a bearing from the laser that the scan's
     /// beams spanned; every range counts.
     #[must_use]

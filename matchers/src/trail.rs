@@ -1,0 +1,392 @@
+//! Spreading a re-anchoring's correction over the stretch that drifted
+//! (`[matcher.revisit] deform`).
+//!
+//! A re-anchoring ([`crate::revisit`]) moves the estimate back onto the old map in one step,
+//! and leaves the map laid while the estimate drifted where it was laid: later visits pair
+//! with either copy, and relations across the jump carry it. The drift grew while the robot
+//! explored new ground, each scan matched against the points the scans just before it
+//! inserted. So the trail of inserted scans tells where it began: at the last scan laid on
+//! old ground (near a scan laid at least `age_scans` insertions before it, or near the map's
+//! first scan, which sets its frame) before the run of scans on new ground that leads to the
+//! revisit. The correction is spread over that run by the path driven, nothing at its start
+//! and all of it where the robot came back onto old ground, as a pose graph with one loop
+//! and equal steps would spread it; the scans since then take all of it. The map's points
+//! move with the scan that laid them, and the trajectory with them ([`Amendment`]).
+//!
+//! A spread is checked before it is made, as a loop closure is checked before it enters a
+//! pose graph: the moved stretch must lie nearer the map laid before it, where they overlap,
+//! than it did ([`moves_fit`]). A re-anchoring the old map only seemed to ask for (a stretch
+//! of corridor like another) would bend a stretch that agreed with the old map off it; such
+//! a correction stays a jump of the estimate, as without the spread.
+
+use qicp_core::{Isometry2, Point2, Pose2, Reference, SpatialIndex};
+use std::collections::HashMap;
+
+/// The side of the cells that tell old ground (m): a scan laid in a cell, or beside one,
+/// where a scan was laid `age_scans` insertions before it is on old ground.
+const GROUND_CELL: f64 = 2.0;
+
+/// A scan that entered the map.
+#[derive(Debug, Clone, Copy)]
+struct Visit {
+    /// The record it came with (counted from the pipeline's first).
+    record: usize,
+    /// Its number in the map ([`qicp_core::Reference::scans`] before it entered).
+    stamp: u32,
+    /// Whether it was laid on old ground.
+    revisiting: bool,
+}
+
+/// The trail of the records and of the scans that entered the map: the laser's path length
+/// at each record (8 bytes a record) and the scans' places.
+#[derive(Debug, Clone, Default)]
+pub struct Trail {
+    /// Insertions after which a scan's ground counts as old.
+    age: usize,
+    /// Per record: the laser's path length from the first record (m).
+    path: Vec<f64>,
+    /// The laser's position at the last record.
+    last: Option<(f64, f64)>,
+    visits: Vec<Visit>,
+    /// Visits before this one lie on a stretch already spread over ([`Trail::anchored`]):
+    /// they count as old ground.
+    anchored: usize,
+    /// Per cell of [`GROUND_CELL`]: the first visit laid in it.
+    first_in: HashMap<(i64, i64), usize>,
+}
+
+/// A correction of earlier poses: record `first + k` moves by `partial(k)`, applied on the
+/// left (in the world), as do the points its scan laid in the map.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Amendment {
+    /// The first record moved (counted from the pipeline's first record).
+    pub first: usize,
+    /// The whole correction, in the world: the re-anchored laser pose times the inverse of
+    /// the match's.
+    pub correction: Pose2,
+    /// Per record from `first` on: the share of the correction it takes, from 0 to 1.
+    pub shares: Vec<f64>,
+}
+
+impl Amendment {
+    /// The correction record `first + k` takes: `share` of the way from the identity to
+    /// [`Amendment::correction`] (translation and angle interpolated linearly).
+    #[must_use]
+    pub fn partial(&self, k: usize) -> Pose2 {
+        let share = self.shares.get(k).copied().unwrap_or(1.0);
+        let c = &self.correction;
+        Pose2::from_isometry(&Isometry2::identity().lerp_slerp(&c.to_isometry(), share))
+    }
+
+    /// The correction record `record` takes, if it is one of [`Amendment::records`].
+    #[must_use]
+    pub fn moved(&self, record: usize) -> Option<Pose2> {
+        self.records()
+            .contains(&record)
+            .then(|| self.partial(record - self.first))
+    }
+
+    /// The records it moves: `first..first + shares.len()`.
+    #[must_use]
+    pub fn records(&self) -> std::ops::Range<usize> {
+        self.first..self.first + self.shares.len()
+    }
+
+    /// Applies it to a trajectory whose element `i` is record `i`'s pose (`pose` reads and
+    /// writes the pose of an element); records beyond its end are left alone.
+    pub fn apply<T>(&self, trajectory: &mut [T], pose: impl Fn(&mut T) -> &mut Pose2) {
+        let end = self.records().end.min(trajectory.len());
+        for (k, item) in trajectory.iter_mut().enumerate().take(end).skip(self.first) {
+            let p = pose(item);
+            *p = self.partial(k - self.first) * *p;
+        }
+    }
+}
+
+impl Trail {
+    /// An empty trail: a scan's ground is old once `age` insertions followed it.
+    #[must_use]
+    pub fn new(age: usize) -> Self {
+        Self {
+            age: age.max(1),
+            ..Self::default()
+        }
+    }
+
+    /// Records processed so far: the number the next record takes.
+    #[must_use]
+    pub fn records(&self) -> usize {
+        self.path.len()
+    }
+
+    /// The record whose scan entered the map last.
+    #[must_use]
+    pub fn last_scan_record(&self) -> Option<usize> {
+        self.visits.last().map(|v| v.record)
+    }
+
+    /// Notes the next record's laser pose (in the world).
+    pub fn record(&mut self, laser: &Pose2) {
+        let here = (laser.x, laser.y);
+        let step = self
+            .last
+            .map_or(0.0, |(x, y)| (here.0 - x).hypot(here.1 - y));
+        let before = self.path.last().copied().unwrap_or(0.0);
+        self.path.push(before + step);
+        self.last = Some(here);
+    }
+
+    /// Notes that the scan of the last record noted entered the map as scan `stamp`, laid
+    /// from `laser` (in the world).
+    pub fn inserted(&mut self, stamp: u32, laser: &Pose2) {
+        let Some(record) = self.path.len().checked_sub(1) else {
+            return;
+        };
+        let n = self.visits.len();
+        // Finite poses (the pipeline's) and cells of 2 m fit an i64; a cast saturates.
+        let cell = (
+            (laser.x / GROUND_CELL).floor() as i64,
+            (laser.y / GROUND_CELL).floor() as i64,
+        );
+        let revisiting = n == 0
+            || (-1..=1).any(|dx| {
+                (-1..=1).any(|dy| {
+                    self.first_in
+                        .get(&(cell.0.saturating_add(dx), cell.1.saturating_add(dy)))
+                        .is_some_and(|&first| first == 0 || first + self.age <= n)
+                })
+            });
+        self.first_in.entry(cell).or_insert(n);
+        self.visits.push(Visit {
+            record,
+            stamp,
+            revisiting,
+        });
+    }
+
+    /// Forgets every scan (the map was cleared); the records' path stays.
+    pub fn cleared(&mut self) {
+        self.visits.clear();
+        self.first_in.clear();
+        self.anchored = 0;
+    }
+
+    /// The amendment that spreads `correction`, found at the record about to be noted, over
+    /// the stretch that drifted, or `None` when the trail shows none (no scan laid on new
+    /// ground since the last one spread over).
+    #[must_use]
+    pub fn amendment(&self, correction: Pose2) -> Option<Amendment> {
+        let v = &self.visits;
+        let anchored = self.anchored.min(v.len());
+        // Back from the newest scan: the run on old ground that leads to the revisit…
+        let mut back = v.len();
+        while back > anchored && v[back - 1].revisiting {
+            back -= 1;
+        }
+        // … and before it the run on new ground.
+        let mut start = back;
+        while start > anchored && !v[start - 1].revisiting {
+            start -= 1;
+        }
+        if start == back {
+            return None;
+        }
+        let first = v[start].record;
+        // The last scan on old ground takes none of it (the map's first is on old ground).
+        let from = self.path[v[start.saturating_sub(1)].record];
+        let to = v.get(back).map_or_else(
+            || self.path.last().copied().unwrap_or(from),
+            |b| self.path[b.record],
+        );
+        let shares = self.path[first..]
+            .iter()
+            .map(|&s| {
+                if to > from {
+                    ((s - from) / (to - from)).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Some(Amendment {
+            first,
+            correction,
+            shares,
+        })
+    }
+
+    /// Notes that the stretch of the last [`Trail::amendment`] was spread over: its scans
+    /// now lie on the old map, and a later correction is spread only over scans laid after
+    /// them.
+    pub fn anchored(&mut self) {
+        self.anchored = self.visits.len();
+    }
+
+    /// The correction each scan of the map takes under `amendment`, by its number.
+    #[must_use]
+    pub fn scan_moves(&self, amendment: &Amendment) -> HashMap<u32, Pose2> {
+        self.visits
+            .iter()
+            .filter(|v| v.record >= amendment.first)
+            .map(|v| (v.stamp, amendment.partial(v.record - amendment.first)))
+            .collect()
+    }
+}
+
+/// How far from a point of a stretch to be spread over the map laid before it counts as
+/// overlapping it (m): the re-anchoring's window.
+const OVERLAP_REACH: f64 = 1.0;
+/// Points of the stretch sampled to tell whether a spread correction fits.
+const OVERLAP_SAMPLES: usize = 2_000;
+
+/// The median of `v` (0 when empty); reorders it.
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// Whether moving the map's scans as `moves` says (by their numbers, [`Reference::born`])
+/// brings the stretch's points nearer the map laid before it where the two overlap: the median distance of a sample of them to
+/// their nearest older point (within [`OVERLAP_REACH`]) must not grow. A drift that was
+/// real laid the stretch's end as a copy beside the old map, which the move lays onto it;
+/// a correction the old map only seemed to ask for (a stretch of corridor that looks like
+/// another) pulls a stretch that agreed with it away.
+pub fn moves_fit<I: SpatialIndex>(reference: &Reference<I>, moves: &HashMap<u32, Pose2>) -> bool {
+    let Some(&boundary) = moves.keys().min() else {
+        return true;
+    };
+    let born = reference.born();
+    let points = reference.index().points();
+    let index = reference.index();
+    let stretch: Vec<usize> = (0..points.len()).filter(|&i| born[i] >= boundary).collect();
+    let step = (stretch.len() / OVERLAP_SAMPLES).max(1);
+    let mut around = Vec::new();
+    let mut nearest_old = |p: &Point2<f64>| {
+        index.within_radius(p, OVERLAP_REACH, &mut around);
+        around
+            .iter()
+            .filter(|n| born[n.id as usize] < boundary)
+            .map(|n| n.dist_sq.sqrt())
+            .fold(None, |m: Option<f64>, d| Some(m.map_or(d, |m| m.min(d))))
+    };
+    let mut before = Vec::new();
+    let mut after = Vec::new();
+    for &i in stretch.iter().step_by(step) {
+        let p = points[i];
+        let moved = moves.get(&born[i]).map_or(p, |by| by.transform_point(&p));
+        let (b, a) = (nearest_old(&p), nearest_old(&moved));
+        if b.is_some() || a.is_some() {
+            before.push(b.unwrap_or(OVERLAP_REACH));
+            after.push(a.unwrap_or(OVERLAP_REACH));
+        }
+    }
+    before.is_empty() || median(&mut after) <= median(&mut before)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A trail of scans that entered the map at `poses`, one record each, old after `age`.
+    fn trail(age: usize, poses: &[Pose2]) -> Trail {
+        let mut t = Trail::new(age);
+        extend(&mut t, poses);
+        t
+    }
+
+    /// Notes one record and one scan at each of `poses`.
+    fn extend(t: &mut Trail, poses: &[Pose2]) {
+        for p in poses {
+            t.record(p);
+            t.inserted(t.records() as u32 - 1, p);
+        }
+    }
+
+    /// Fifteen scans turning on the spot at the origin, then a 20 m square at 1 m a scan,
+    /// back towards the origin down the y axis, ending at (0, `end_y`), shifted by `dy`.
+    fn square_loop(end_y: i32, dy: f64) -> Vec<Pose2> {
+        let mut poses: Vec<Pose2> = (0..15)
+            .map(|k| Pose2::new(0.0, dy, 0.1 * k as f64))
+            .collect();
+        let legs = (1..=20).map(|i| (i, 0)).chain((1..=20).map(|i| (20, i)));
+        let legs = legs.chain((1..=20).map(|i| (20 - i, 20)));
+        let legs = legs.chain((1..=20 - end_y).map(|i| (0, 20 - i)));
+        poses.extend(legs.map(|(x, y)| Pose2::new(f64::from(x), f64::from(y) + dy, 0.0)));
+        poses
+    }
+
+    #[test]
+    fn the_stretch_spread_over_runs_from_leaving_old_ground_to_coming_back() {
+        let poses = square_loop(1, 0.0);
+        let t = trail(10, &poses);
+        let correction = Pose2::new(0.5, -0.2, 0.02);
+        let a = t.amendment(correction).expect("a stretch on new ground");
+        // Old ground reaches 3 m from the origin (its 2 m cell and the cells beside it): the
+        // stretch begins at (4, 0), record 18, and ends at (0, 3), which takes all of it, as
+        // do the records after it.
+        assert_eq!(a.records(), 18..poses.len());
+        let back = poses.len() - 3;
+        assert_eq!((poses[back].x, poses[back].y), (0.0, 3.0));
+        for (k, share) in a.shares.iter().enumerate() {
+            // 1 m a record from (3, 0), 74 m to (0, 3).
+            let expected = ((k + 1) as f64 / 74.0).min(1.0);
+            assert!((share - expected).abs() < 1e-12, "{k}: {share}");
+        }
+        assert_eq!(a.partial(back - a.first), correction);
+        // Translation and angle are interpolated linearly.
+        let p = a.partial(37);
+        let share = a.shares[37];
+        assert!((p.x - 0.5 * share).abs() < 1e-12 && (p.y + 0.2 * share).abs() < 1e-12);
+        assert!((p.theta - 0.02 * share).abs() < 1e-12, "{p:?}");
+        assert_eq!(a.moved(17), None);
+        assert_eq!(a.moved(18 + 37), Some(p));
+        // The map's scans take their records' shares.
+        let moves = t.scan_moves(&a);
+        assert_eq!(moves.len(), a.shares.len());
+        assert_eq!(moves[&(18 + 37)], p);
+        assert!(!moves.contains_key(&17));
+    }
+
+    #[test]
+    fn a_trail_that_never_left_old_ground_spreads_nothing() {
+        let poses: Vec<Pose2> = (0..40)
+            .map(|k| Pose2::new(0.05 * k as f64, 0.0, 0.0))
+            .collect();
+        assert_eq!(trail(10, &poses).amendment(Pose2::new(0.3, 0.0, 0.0)), None);
+        assert_eq!(Trail::new(10).amendment(Pose2::new(0.3, 0.0, 0.0)), None);
+    }
+
+    #[test]
+    fn a_stretch_spread_over_once_is_old_ground_for_the_next_correction() {
+        let mut t = trail(10, &square_loop(1, 0.0));
+        t.anchored();
+        assert_eq!(t.amendment(Pose2::new(0.1, 0.0, 0.0)), None);
+        // A second loop 30 m up the y axis, all new ground, back near its start.
+        let n = t.records();
+        extend(&mut t, &square_loop(1, 30.0)[15..]);
+        let a = t
+            .amendment(Pose2::new(0.1, 0.0, 0.0))
+            .expect("the second loop");
+        assert_eq!(a.first, n);
+    }
+
+    #[test]
+    fn an_amendment_moves_the_poses_of_its_records_only() {
+        let a = Amendment {
+            first: 2,
+            correction: Pose2::new(1.0, 0.0, 0.0),
+            shares: vec![0.25, 0.5, 1.0],
+        };
+        let mut poses = vec![Pose2::IDENTITY; 7];
+        a.apply(&mut poses, |p| p);
+        let xs: Vec<f64> = poses.iter().map(|p| p.x).collect();
+        assert_eq!(xs, [0.0, 0.0, 0.25, 0.5, 1.0, 0.0, 0.0]);
+        // A trajectory shorter than the stretch takes what it holds.
+        let mut short = vec![Pose2::IDENTITY; 3];
+        a.apply(&mut short, |p| p);
+        assert_eq!(short[2].x, 0.25);
+    }
+}
