@@ -274,6 +274,12 @@ pub fn run(args: MatchArgs) -> Result<()> {
             );
         }
         let (estimate, row) = matcher.push(&record);
+        if let Some(amendment) = matcher.take_amendment() {
+            writer.amend(&amendment);
+            if let Some(probe) = &mut probe {
+                probe.amend(|k| amendment.moved(k));
+            }
+        }
         writer.push(record.timestamp(), &estimate.pose, &row)?;
         if let Some(bag) = &mut bag {
             bag.writer.record(&record)?;

@@ -9,6 +9,7 @@
 use super::*;
 use qicp_eval::{RelationProbe, origin_alignment};
 use qicp_io::tum::write_tum_pose;
+use qicp_matchers::trail::Amendment;
 use qicp_runner::matching::{MatchLoop, RunWriter, progress_bar};
 
 /// One trajectory as it streams past: the poses a relation may need and, when there is truth
@@ -39,6 +40,16 @@ impl Track {
             whole.push((t, pose));
         }
         Ok(())
+    }
+
+    /// Moves the poses pushed so far as `amendment` says (by their order of pushing).
+    fn amend(&mut self, amendment: &Amendment) {
+        if let Some(probe) = &mut self.probe {
+            probe.amend(|k| amendment.moved(k));
+        }
+        if let Some(whole) = &mut self.whole {
+            amendment.apply(whole, |(_, pose)| pose);
+        }
     }
 
     fn scores(&self, source: &Source) -> Result<Scores> {
@@ -96,6 +107,10 @@ pub(super) fn run_streamed(
     source
         .each_record(|record| {
             let (estimate, row) = matching.push(record);
+            if let Some(amendment) = matching.take_amendment() {
+                writer.amend(&amendment);
+                track.amend(&amendment);
+            }
             let t = record.timestamp();
             writer.push(t, &estimate.pose, &row)?;
             track.push(t, estimate.pose)?;

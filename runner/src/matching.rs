@@ -4,6 +4,7 @@
 use anyhow::{Context, Result};
 use qicp_core::{Fallback, Record};
 use qicp_io::tum::{Stamped, write_tum_pose};
+use qicp_matchers::trail::Amendment;
 use qicp_matchers::{Check, Estimate, MatcherConfig, Odometry};
 use serde::Serialize;
 use std::io::Write;
@@ -287,6 +288,12 @@ impl MatchLoop {
         (estimate, row)
     }
 
+    /// A correction of earlier records' poses made by the last [`MatchLoop::push`], once
+    /// ([`Odometry::take_amendment`]).
+    pub fn take_amendment(&mut self) -> Option<Amendment> {
+        self.odometry.take_amendment()
+    }
+
     /// The totals so far.
     #[must_use]
     pub fn summary(&self) -> MatchSummary {
@@ -326,6 +333,9 @@ impl Matching {
     /// Matches one record and returns the estimate.
     pub fn push(&mut self, record: &Record) -> Estimate {
         let (estimate, row) = self.inner.push(record);
+        if let Some(amendment) = self.inner.take_amendment() {
+            amendment.apply(&mut self.trajectory, |(_, pose)| pose);
+        }
         self.trajectory.push((record.timestamp(), estimate.pose));
         self.rows.push(row);
         estimate
@@ -432,6 +442,9 @@ fn write_row<W: Write>(w: &mut W, r: &ScanRow) -> std::io::Result<()> {
 pub struct RunWriter {
     dir: std::path::PathBuf,
     trajectory: OutputFile,
+    /// The poses so far (32 bytes a record), written at [`RunWriter::commit`]: a re-anchoring
+    /// spread over the stretch before it amends them ([`RunWriter::amend`]).
+    poses: Vec<Stamped>,
     matches: OutputFile,
     // Last, so that it is dropped after the files have removed their temporaries.
     made: CreatedDir,
@@ -455,6 +468,7 @@ impl RunWriter {
         Ok(Self {
             dir: dir.to_path_buf(),
             trajectory,
+            poses: Vec::new(),
             matches,
             made,
         })
@@ -462,13 +476,21 @@ impl RunWriter {
 
     /// Appends one scan's pose and row.
     pub fn push(&mut self, timestamp: f64, pose: &qicp_core::Pose2, row: &ScanRow) -> Result<()> {
-        write_tum_pose(&mut self.trajectory, timestamp, pose).context("writing trajectory.tum")?;
+        self.poses.push((timestamp, *pose));
         write_row(&mut self.matches, row).context("writing matches.csv")?;
         Ok(())
     }
 
+    /// Moves the poses pushed so far as `amendment` says (by their order of pushing).
+    pub fn amend(&mut self, amendment: &Amendment) {
+        amendment.apply(&mut self.poses, |(_, pose)| pose);
+    }
+
     /// Writes `config.toml` and `summary.json` (when given) and renames every file into place.
-    pub fn commit(self, config: &MatcherConfig, summary: Option<&str>) -> Result<()> {
+    pub fn commit(mut self, config: &MatcherConfig, summary: Option<&str>) -> Result<()> {
+        for (t, pose) in &self.poses {
+            write_tum_pose(&mut self.trajectory, *t, pose).context("writing trajectory.tum")?;
+        }
         self.trajectory.commit()?;
         self.matches.commit()?;
         write_atomic(&self.dir.join("config.toml"), config.to_toml().as_bytes())?;

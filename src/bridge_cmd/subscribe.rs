@@ -121,6 +121,11 @@ pub fn run_subscribe(
             StreamEvent::Data(view) => match view.header.to_record(view.ranges) {
                 Ok(record) => {
                     let (estimate, row) = matching.push(&record);
+                    // The poses published stand; the trajectory written takes the
+                    // amendments of a re-anchoring spread over the records before it.
+                    if let (Some(w), Some(amendment)) = (&mut writer, matching.take_amendment()) {
+                        w.amend(&amendment);
+                    }
                     if let Some(w) = &mut writer
                         && let Err(e) = w.push(record.timestamp(), &estimate.pose, &row)
                     {

@@ -141,7 +141,7 @@ impl Job {
         records: impl Iterator<Item = Result<Record>>,
         relations: &[Relation],
         mut trajectory: Option<&mut dyn std::io::Write>,
-        mut keep: Option<&mut Vec<Stamped>>,
+        keep: Option<&mut Vec<Stamped>>,
     ) -> Result<RunFigures> {
         let config = match &self.config {
             Ok(c) => c,
@@ -153,16 +153,26 @@ impl Job {
         };
         let mut matcher = MatchLoop::new(config)?;
         let mut probe = RelationProbe::new(relations, SNAPPED_MAX_DT)?;
+        // A trajectory to write is kept whole: a re-anchoring may amend any of it.
+        let mut kept = Vec::new();
+        let mut keep = keep.or(trajectory.is_some().then_some(&mut kept));
         for record in records {
             let record = record?;
             let (estimate, _) = matcher.push(&record);
-            probe.push(record.timestamp(), estimate.pose)?;
-            if let Some(w) = trajectory.as_mut() {
-                write_tum_pose(w, record.timestamp(), &estimate.pose)
-                    .context("writing the trajectory")?;
+            if let Some(amendment) = matcher.take_amendment() {
+                probe.amend(|k| amendment.moved(k));
+                if let Some(k) = keep.as_mut() {
+                    amendment.apply(k, |(_, pose)| pose);
+                }
             }
+            probe.push(record.timestamp(), estimate.pose)?;
             if let Some(k) = keep.as_mut() {
                 k.push((record.timestamp(), estimate.pose));
+            }
+        }
+        if let (Some(w), Some(k)) = (trajectory.as_mut(), keep.as_ref()) {
+            for (t, pose) in k.iter() {
+                write_tum_pose(&mut *w, *t, pose).context("writing the trajectory")?;
             }
         }
         let summary = matcher.summary();
