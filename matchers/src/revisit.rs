@@ -78,8 +78,8 @@ pub struct RevisitParams {
     /// the map's points laid since the robot left old ground move with it, by the path
     /// driven, and so do the poses of those records
     /// ([`Odometry::take_amendment`](crate::pipeline::Odometry::take_amendment)), where the
-    /// moved stretch then lies nearer the old map. False leaves the drifted stretch where it
-    /// was laid, and the estimate jumps.
+    /// moved stretch then lies nearer the old map. Default true. False leaves the drifted
+    /// stretch where it was laid, and the estimate jumps.
     pub deform: bool,
 }
 
@@ -101,7 +101,7 @@ impl Default for RevisitParams {
             window_deg: 3.0,
             confirmations: 2,
             confirm_gap: 8,
-            deform: false,
+            deform: true,
         }
     }
 }

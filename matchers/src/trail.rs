@@ -5,13 +5,17 @@
 //! and leaves the map laid while the estimate drifted where it was laid: later visits pair
 //! with either copy, and relations across the jump carry it. The drift grew while the robot
 //! explored new ground, each scan matched against the points the scans just before it
-//! inserted. So the trail of inserted scans tells where it began: at the last scan laid on
-//! old ground (near a scan laid at least `age_scans` insertions before it, or near the map's
-//! first scan, which sets its frame) before the run of scans on new ground that leads to the
-//! revisit. The correction is spread over that run by the path driven, nothing at its start
-//! and all of it where the robot came back onto old ground, as a pose graph with one loop
-//! and equal steps would spread it; the scans since then take all of it. The map's points
-//! move with the scan that laid them, and the trajectory with them ([`Amendment`]).
+//! inserted. So the trail of the records tells where it began: at the last record on old
+//! ground (near a scan laid in the map at least `age_scans` insertions before, or near the
+//! map's first scan, which sets its frame) before the run of records on new ground that
+//! leads back to old ground. Every record counts, inserted or not: a map that takes only
+//! scans with new points (q-idc's novelty gate) takes few on old ground. The correction is
+//! spread from there to the re-anchoring by the path driven, nothing at the start and all
+//! of it at the re-anchored record, as a pose graph with one loop and equal steps would
+//! spread it. Where the robot had been back on old ground for more than `age_scans` records
+//! before the re-anchoring, the drift grew there instead, against the recent points it laid
+//! over the old ones, and the spread covers that run alone. The map's points move with the
+//! scan that laid them, and the trajectory with them ([`Amendment`]).
 //!
 //! A spread is checked before it is made, as a loop closure is checked before it enters a
 //! pose graph: the moved stretch must lie nearer the map laid before it, where they overlap,
@@ -33,26 +37,35 @@ struct Visit {
     record: usize,
     /// Its number in the map ([`qicp_core::Reference::scans`] before it entered).
     stamp: u32,
-    /// Whether it was laid on old ground.
-    revisiting: bool,
 }
 
-/// The trail of the records and of the scans that entered the map: the laser's path length
-/// at each record (8 bytes a record) and the scans' places.
+/// The trail of the records and of the scans that entered the map: per record the laser's
+/// path length and whether it was on old ground (9 bytes a record), and the scans' places.
 #[derive(Debug, Clone, Default)]
 pub struct Trail {
     /// Insertions after which a scan's ground counts as old.
     age: usize,
     /// Per record: the laser's path length from the first record (m).
     path: Vec<f64>,
+    /// Per record: whether it was on old ground.
+    old_ground: Vec<bool>,
     /// The laser's position at the last record.
     last: Option<(f64, f64)>,
     visits: Vec<Visit>,
-    /// Visits before this one lie on a stretch already spread over ([`Trail::anchored`]):
+    /// Records before this one lie on a stretch already spread over ([`Trail::anchored`]):
     /// they count as old ground.
     anchored: usize,
-    /// Per cell of [`GROUND_CELL`]: the first visit laid in it.
+    /// Per cell of [`GROUND_CELL`]: the number of the first insertion laid in it.
     first_in: HashMap<(i64, i64), usize>,
+}
+
+/// The cell of [`GROUND_CELL`] holding the laser at `laser`. Finite poses (the pipeline's)
+/// and cells of 2 m fit an i64; the cast saturates.
+fn cell(laser: &Pose2) -> (i64, i64) {
+    (
+        (laser.x / GROUND_CELL).floor() as i64,
+        (laser.y / GROUND_CELL).floor() as i64,
+    )
 }
 
 /// A correction of earlier poses: record `first + k` moves by `partial(k)`, applied on the
@@ -125,7 +138,8 @@ impl Trail {
         self.visits.last().map(|v| v.record)
     }
 
-    /// Notes the next record's laser pose (in the world).
+    /// Notes the next record's laser pose (in the world): its path, and whether it lies on
+    /// old ground. The map's first record does.
     pub fn record(&mut self, laser: &Pose2) {
         let here = (laser.x, laser.y);
         let step = self
@@ -134,6 +148,17 @@ impl Trail {
         let before = self.path.last().copied().unwrap_or(0.0);
         self.path.push(before + step);
         self.last = Some(here);
+        let n = self.visits.len();
+        let (cx, cy) = cell(laser);
+        let old = n == 0
+            || (-1..=1).any(|dx| {
+                (-1..=1).any(|dy| {
+                    self.first_in
+                        .get(&(cx.saturating_add(dx), cy.saturating_add(dy)))
+                        .is_some_and(|&first| first == 0 || first + self.age <= n)
+                })
+            });
+        self.old_ground.push(old);
     }
 
     /// Notes that the scan of the last record noted entered the map as scan `stamp`, laid
@@ -142,62 +167,48 @@ impl Trail {
         let Some(record) = self.path.len().checked_sub(1) else {
             return;
         };
-        let n = self.visits.len();
-        // Finite poses (the pipeline's) and cells of 2 m fit an i64; a cast saturates.
-        let cell = (
-            (laser.x / GROUND_CELL).floor() as i64,
-            (laser.y / GROUND_CELL).floor() as i64,
-        );
-        let revisiting = n == 0
-            || (-1..=1).any(|dx| {
-                (-1..=1).any(|dy| {
-                    self.first_in
-                        .get(&(cell.0.saturating_add(dx), cell.1.saturating_add(dy)))
-                        .is_some_and(|&first| first == 0 || first + self.age <= n)
-                })
-            });
-        self.first_in.entry(cell).or_insert(n);
-        self.visits.push(Visit {
-            record,
-            stamp,
-            revisiting,
-        });
+        self.first_in
+            .entry(cell(laser))
+            .or_insert(self.visits.len());
+        self.visits.push(Visit { record, stamp });
     }
 
-    /// Forgets every scan (the map was cleared); the records' path stays.
+    /// Forgets every scan (the map was cleared): no record before it is spread over again.
     pub fn cleared(&mut self) {
         self.visits.clear();
         self.first_in.clear();
-        self.anchored = 0;
+        self.anchored = self.path.len();
     }
 
     /// The amendment that spreads `correction`, found at the record about to be noted, over
-    /// the stretch that drifted, or `None` when the trail shows none (no scan laid on new
+    /// the stretch that drifted, or `None` when the trail shows none (no record on new
     /// ground since the last one spread over).
     #[must_use]
     pub fn amendment(&self, correction: Pose2) -> Option<Amendment> {
-        let v = &self.visits;
-        let anchored = self.anchored.min(v.len());
-        // Back from the newest scan: the run on old ground that leads to the revisit…
-        let mut back = v.len();
-        while back > anchored && v[back - 1].revisiting {
+        let old = &self.old_ground;
+        let anchored = self.anchored.min(old.len());
+        // Back from the newest record: the run on old ground that leads to the revisit…
+        let mut back = old.len();
+        while back > anchored && old[back - 1] {
             back -= 1;
         }
         // … and before it the run on new ground.
-        let mut start = back;
-        while start > anchored && !v[start - 1].revisiting {
-            start -= 1;
+        let mut first = back;
+        while first > anchored && !old[first - 1] {
+            first -= 1;
         }
-        if start == back {
+        if first == back {
             return None;
         }
-        let first = v[start].record;
-        // The last scan on old ground takes none of it (the map's first is on old ground).
-        let from = self.path[v[start.saturating_sub(1)].record];
-        let to = v.get(back).map_or_else(
-            || self.path.last().copied().unwrap_or(from),
-            |b| self.path[b.record],
-        );
+        // Back on old ground for long before the re-anchoring, the robot's estimate drifted
+        // there, against the recent points it laid over the old ones: the spread covers
+        // that run alone.
+        if old.len() - back > self.age {
+            first = back;
+        }
+        // The last record on old ground takes none of it (the map's first is on old ground).
+        let from = self.path[first.saturating_sub(1)];
+        let to = self.path.last().copied().unwrap_or(from);
         let shares = self.path[first..]
             .iter()
             .map(|&s| {
@@ -216,10 +227,10 @@ impl Trail {
     }
 
     /// Notes that the stretch of the last [`Trail::amendment`] was spread over: its scans
-    /// now lie on the old map, and a later correction is spread only over scans laid after
+    /// now lie on the old map, and a later correction is spread only over records after
     /// them.
     pub fn anchored(&mut self) {
-        self.anchored = self.visits.len();
+        self.anchored = self.path.len();
     }
 
     /// The correction each scan of the map takes under `amendment`, by its number.
@@ -325,17 +336,15 @@ mod tests {
         let correction = Pose2::new(0.5, -0.2, 0.02);
         let a = t.amendment(correction).expect("a stretch on new ground");
         // Old ground reaches 3 m from the origin (its 2 m cell and the cells beside it): the
-        // stretch begins at (4, 0), record 18, and ends at (0, 3), which takes all of it, as
-        // do the records after it.
+        // stretch begins at (4, 0), record 18, and runs on to the last record, (0, 1), which
+        // takes all of it.
         assert_eq!(a.records(), 18..poses.len());
-        let back = poses.len() - 3;
-        assert_eq!((poses[back].x, poses[back].y), (0.0, 3.0));
         for (k, share) in a.shares.iter().enumerate() {
-            // 1 m a record from (3, 0), 74 m to (0, 3).
-            let expected = ((k + 1) as f64 / 74.0).min(1.0);
+            // 1 m a record from (3, 0), 76 m to (0, 1).
+            let expected = (k + 1) as f64 / 76.0;
             assert!((share - expected).abs() < 1e-12, "{k}: {share}");
         }
-        assert_eq!(a.partial(back - a.first), correction);
+        assert_eq!(a.partial(a.shares.len() - 1), correction);
         // Translation and angle are interpolated linearly.
         let p = a.partial(37);
         let share = a.shares[37];
@@ -348,6 +357,33 @@ mod tests {
         assert_eq!(moves.len(), a.shares.len());
         assert_eq!(moves[&(18 + 37)], p);
         assert!(!moves.contains_key(&17));
+    }
+
+    #[test]
+    fn records_on_old_ground_count_though_the_map_takes_none_of_their_scans() {
+        // As a novelty gate does on a revisit: the last leg's scans do not enter the map.
+        let poses = square_loop(1, 0.0);
+        let mut t = Trail::new(10);
+        for (k, p) in poses.iter().enumerate() {
+            t.record(p);
+            if p.x > 0.0 || k < 15 {
+                t.inserted(k as u32, p);
+            }
+        }
+        let a = t.amendment(Pose2::new(0.5, 0.0, 0.0)).expect("a stretch");
+        assert_eq!(a.records(), 18..poses.len());
+    }
+
+    #[test]
+    fn a_drift_found_long_after_coming_back_is_spread_over_the_run_on_old_ground() {
+        // Back on old ground at (0, 3), record 91, then 150 records along the first leg again
+        // before the re-anchoring: the drift grew there.
+        let mut poses = square_loop(0, 0.0);
+        assert_eq!((poses[91].x, poses[91].y), (0.0, 3.0));
+        poses.extend((0..150).map(|k| Pose2::new(0.1 * k as f64, 0.5, 0.0)));
+        let t = trail(10, &poses);
+        let a = t.amendment(Pose2::new(0.5, 0.0, 0.0)).expect("a stretch");
+        assert_eq!(a.records(), 91..poses.len());
     }
 
     #[test]
