@@ -23,7 +23,7 @@
 //! of corridor like another) would bend a stretch that agreed with the old map off it; such
 //! a correction stays a jump of the estimate, as without the spread.
 
-use qicp_core::{Isometry2, Point2, Pose2, Reference, SpatialIndex};
+use qicp_core::{Point2, Pose2, Reference, SpatialIndex};
 use std::collections::HashMap;
 
 /// The side of the cells that tell old ground (m): a scan laid in a cell, or beside one,
@@ -88,7 +88,9 @@ impl Amendment {
     pub fn partial(&self, k: usize) -> Pose2 {
         let share = self.shares.get(k).copied().unwrap_or(1.0);
         let c = &self.correction;
-        Pose2::from_isometry(&Isometry2::identity().lerp_slerp(&c.to_isometry(), share))
+        // Plain products, no fused multiply-add: the Python package must give the command
+        // line's poses to the bit, and a process may bind `fma` to a library of its own.
+        Pose2::new(share * c.x, share * c.y, share * c.theta)
     }
 
     /// The correction record `record` takes, if it is one of [`Amendment::records`].
