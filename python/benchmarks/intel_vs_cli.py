@@ -45,6 +45,8 @@ def main() -> None:
             traj = []
             for r in qicp.read_carmen(a.log):
                 res = m.process_record(r)
+                if res.amendment is not None:
+                    res.amendment.apply(traj)
                 traj.append((res.timestamp, *res.pose))
             py_s.append(time.perf_counter() - t0)
             qicp.write_tum(tmp / "py.tum", traj)

@@ -132,7 +132,12 @@ def karto_run(a):
 def qicp_run(a):
     """The qicp matcher's trajectory over the same records, as `qicp match` runs it."""
     matcher = qicp.Matcher(a.matcher)
-    return [(res.timestamp, *res.pose) for res in map(matcher.process_record, records(a))]
+    traj = []
+    for res in map(matcher.process_record, records(a)):
+        if res.amendment is not None:  # a re-anchoring spread over the poses before it
+            res.amendment.apply(traj)
+        traj.append((res.timestamp, *res.pose))
+    return traj
 
 
 def main() -> None:

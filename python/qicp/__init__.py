@@ -6,8 +6,12 @@ Python. A log fed through :class:`Matcher` gives the trajectory ``qicp match`` w
     import qicp
 
     m = qicp.Matcher("q-wsm")
-    poses = [m.process_record(r) for r in qicp.read_carmen("intel.clf.bz2")]
-    traj = [(r.timestamp, *r.pose) for r in poses]
+    traj = []
+    for r in qicp.read_carmen("intel.clf.bz2"):
+        res = m.process_record(r)
+        if res.amendment is not None:  # a re-anchoring spread over the poses before it
+            res.amendment.apply(traj)
+        traj.append((res.timestamp, *res.pose))
     print(qicp.evaluate_relations(traj, "intel.relations")["trans_mean"])
 """
 

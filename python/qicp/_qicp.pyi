@@ -7,6 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
+    "Amendment",
     "Log",
     "MatchResult",
     "Matcher",
@@ -41,12 +42,38 @@ class QicpError(Exception):
     """A refusal of qicp, with the message the command line prints."""
 
 @final
+class Amendment:
+    """A correction of earlier scans' poses (``MatchResult.amendment``): the pose of scan
+    ``first + k`` (counted from the matcher's first scan, 0) moves by ``shares[k]`` of
+    ``correction``, applied in the world (on the left)."""
+
+    @property
+    def first(self) -> int:
+        """The number of the first scan it moves."""
+    @property
+    def correction(self) -> _Pose:
+        """The whole correction in the world, which the re-anchored scan took."""
+    @property
+    def shares(self) -> npt.NDArray[np.float64]:
+        """Per scan from ``first`` on, the share of the correction it takes (0 to 1)."""
+    def moved(self, scan: int, pose: _Pose) -> _Pose:
+        """``pose`` of scan number ``scan`` moved as this amendment moves that scan."""
+    def apply(self, trajectory: list[Tuple[float, ...]]) -> None:
+        """Moves in place the poses of ``trajectory``, whose item i is scan i's pose
+        (x, y, θ) or a tuple ending in it (t, x, y, θ)."""
+
+@final
 class MatchResult:
     """What a matcher says about one scan."""
 
     @property
     def timestamp(self) -> float:
         """Time of the scan (s)."""
+    @property
+    def amendment(self) -> Optional[Amendment]:
+        """A correction of earlier scans' poses that this scan's re-anchoring spread over the
+        stretch that drifted (``[matcher.revisit] deform``), or None: the command line's
+        trajectory holds the poses so corrected."""
     @property
     def pose(self) -> _Pose:
         """The robot's pose in the world, as the command line's trajectory has it."""

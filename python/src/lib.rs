@@ -21,7 +21,7 @@ mod sweep;
 
 use evaluation::{ate, evaluate_relations, read_tum, write_tum};
 use logs::{LaserRecord, Log, read_bag, read_carmen};
-use matcher::{MatchResult, Matcher, matcher_names};
+use matcher::{Amendment, MatchResult, Matcher, matcher_names};
 use sweep::{reference_relations, sweep_relations, sweep_report, sweep_run, sweep_variants};
 
 create_exception!(
@@ -84,6 +84,7 @@ fn _qicp(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("QicpError", m.py().get_type::<QicpError>())?;
     m.add_class::<Matcher>()?;
     m.add_class::<MatchResult>()?;
+    m.add_class::<Amendment>()?;
     m.add_class::<LaserRecord>()?;
     m.add_class::<Log>()?;
     m.add_function(wrap_pyfunction!(read_carmen, m)?)?;

@@ -36,6 +36,7 @@ impl Matcher {
         let mut odometry = lock(&self.odometry);
         let odometry = &mut **odometry;
         let estimate = py.detach(|| odometry.process(record));
+        let amendment = odometry.take_amendment().map(Amendment);
         let result = &estimate.result;
         let matched = result.fallback.is_none();
         MatchResult {
@@ -52,6 +53,7 @@ impl Matcher {
             inserted: estimate.inserted,
             iterations: result.iterations,
             correspondences: result.correspondences,
+            amendment,
         }
     }
 }
@@ -175,6 +177,7 @@ pub(crate) struct MatchResult {
     inserted: bool,
     iterations: u32,
     correspondences: usize,
+    amendment: Option<Amendment>,
 }
 
 #[pymethods]
@@ -183,6 +186,13 @@ impl MatchResult {
     #[getter]
     fn timestamp(&self) -> f64 {
         self.timestamp
+    }
+    /// A correction of earlier scans' poses that this scan's re-anchoring spread over the
+    /// stretch that drifted (`[matcher.revisit] deform`), or None: the command line's
+    /// trajectory holds the poses so corrected.
+    #[getter]
+    fn amendment(&self) -> Option<Amendment> {
+        self.amendment.clone()
     }
     /// The robot's pose in the world (x, y, θ), as the command line's trajectory has it.
     #[getter]
@@ -240,4 +250,66 @@ impl MatchResult {
 #[pyfunction]
 pub(crate) fn matcher_names<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
     PyList::new(py, REGISTRY.names())
+}
+
+/// A correction of earlier scans' poses (`MatchResult.amendment`): the pose of the scan
+/// numbered `first + k` (counted from the matcher's first scan, 0) moves by `shares[k]` of
+/// `correction`, applied in the world (on the left).
+#[pyclass(module = "qicp._qicp", frozen)]
+#[derive(Clone)]
+pub(crate) struct Amendment(qicp_matchers::trail::Amendment);
+
+#[pymethods]
+impl Amendment {
+    /// The number of the first scan it moves (counted from the matcher's first, 0).
+    #[getter]
+    fn first(&self) -> usize {
+        self.0.first
+    }
+    /// The whole correction (x, y, θ) in the world, which the re-anchored scan took.
+    #[getter]
+    fn correction(&self) -> (f64, f64, f64) {
+        pose_tuple(&self.0.correction)
+    }
+    /// Per scan from `first` on, the share of the correction it takes (0 to 1).
+    #[getter]
+    fn shares<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.0.shares)
+    }
+    /// `pose` (x, y, θ) of scan number `scan` moved as this amendment moves that scan.
+    fn moved(&self, scan: usize, pose: (f64, f64, f64)) -> PyResult<(f64, f64, f64)> {
+        let p = pose_of(pose, "pose")?;
+        Ok(pose_tuple(&self.0.moved(scan).map_or(p, |by| by * p)))
+    }
+    /// Moves, in place, the poses of `trajectory`, a list whose item i is scan i's pose
+    /// (x, y, θ) or a tuple ending in it (t, x, y, θ).
+    fn apply(&self, trajectory: &Bound<'_, PyList>) -> PyResult<()> {
+        for scan in self.0.records().take_while(|&k| k < trajectory.len()) {
+            let item = trajectory.get_item(scan)?;
+            let values: Vec<f64> = item.extract()?;
+            let Some(split) = values.len().checked_sub(3) else {
+                return Err(QicpError::new_err(format!(
+                    "trajectory[{scan}] holds {} numbers: a pose is (x, y, θ)",
+                    values.len()
+                )));
+            };
+            let (x, y, theta) = (values[split], values[split + 1], values[split + 2]);
+            let moved = self.moved(scan, (x, y, theta))?;
+            let mut out = values[..split].to_vec();
+            out.extend([moved.0, moved.1, moved.2]);
+            trajectory.set_item(scan, pyo3::types::PyTuple::new(trajectory.py(), out)?)?;
+        }
+        Ok(())
+    }
+    fn __repr__(&self) -> String {
+        let c = &self.0.correction;
+        format!(
+            "Amendment(first={}, scans={}, correction=({:.4}, {:.4}, {:.5}))",
+            self.0.first,
+            self.0.shares.len(),
+            c.x,
+            c.y,
+            c.theta
+        )
+    }
 }

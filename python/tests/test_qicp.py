@@ -27,6 +27,9 @@ def test_intel_q_wsm_trajectory_is_the_command_lines_byte_for_byte(intel, qicp_b
     traj = []
     for r in qicp.read_carmen(intel):
         res = m.process_record(r)
+        # A re-anchoring spread over the stretch before it moves those poses too.
+        if res.amendment is not None:
+            res.amendment.apply(traj)
         traj.append((res.timestamp, *res.pose))
     qicp.write_tum(tmp_path / "py.tum", traj)
     assert (tmp_path / "py.tum").read_bytes() == (tmp_path / "cli" / "trajectory.tum").read_bytes()
@@ -42,6 +45,30 @@ def test_intel_q_wsm_trajectory_is_the_command_lines_byte_for_byte(intel, qicp_b
     in_memory = qicp.evaluate_relations(traj, INTEL_RELATIONS)
     assert all(math.isclose(in_memory[k], py[k], rel_tol=1e-9) for k in py)
     assert py["n"] > 2900 and py["trans_mean"] < 0.05
+
+
+def test_a_reanchoring_spread_over_intels_first_loop_amends_the_poses_before_it(intel):
+    # As tests/intel_matching.rs: the first loop's revisit re-anchors q-wsm once; spread over
+    # the loop, no relation of the first 2,500 records is off by the jump (0.43 m).
+    m = qicp.Matcher("q-wsm", revisit={"deform": True})
+    traj, amendments = [], []
+    for r in first_records(intel, 2500):
+        res = m.process_record(r)
+        if res.amendment is not None:
+            amendments.append(res.amendment)
+            res.amendment.apply(traj)
+        traj.append((res.timestamp, *res.pose))
+    assert len(amendments) == 1
+    a = amendments[0]
+    assert 0 < a.first and a.first + len(a.shares) == 1865
+    assert a.shares[0] >= 0.0 and a.shares[-1] == 1.0
+    assert all(x <= y for x, y in zip(a.shares, a.shares[1:]))
+    # A scan before the stretch keeps its pose; the last one takes the whole correction.
+    assert a.moved(a.first - 1, (1.0, 2.0, 0.5)) == (1.0, 2.0, 0.5)
+    x, y, theta = a.correction
+    assert abs(x) + abs(y) > 0.1
+    report = qicp.evaluate_relations(traj, INTEL_RELATIONS)
+    assert report["n"] == 401 and report["trans_max"] < 0.15, report
 
 
 def test_arrays_in_give_the_poses_of_records_in(intel):

@@ -143,6 +143,8 @@ def python_run(records, matcher, float32=False):
             range_min=f(r.range_min),
             laser_offset=r.laser_offset,
         )
+        if res.amendment is not None:  # as the command line's trajectory takes it
+            res.amendment.apply(out)
         out.append((res.timestamp, *res.pose))
     return np.array(out)
 
@@ -223,7 +225,11 @@ def test_bag_errors_name_what_is_missing(qicp_bin, records, bag, tmp_path):
 def test_read_bag_gives_the_records_qicp_match_reads(qicp_bin, bag, records, tmp_path):
     m = qicp.Matcher("wsm")
     log = qicp.read_bag(bag)
-    traj = [(res.timestamp, *res.pose) for res in map(m.process_record, log)]
+    traj = []
+    for res in map(m.process_record, log):
+        if res.amendment is not None:
+            res.amendment.apply(traj)
+        traj.append((res.timestamp, *res.pose))
     assert log.records == SCANS and log.dropped == 0
     qicp.write_tum(tmp_path / "py.tum", traj)
     cli = match_bag(qicp_bin, bag, "wsm", tmp_path / "cli")
