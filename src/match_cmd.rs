@@ -248,13 +248,13 @@ pub fn run(args: MatchArgs) -> Result<()> {
     outputs.extend(args.out_mcap.as_deref());
     refuse_to_overwrite(log_path, &outputs)?;
     let mut reader = LogReader::open(log_path, &options)?;
-    let mut writer = RunWriter::create(out)?;
+    let mut matcher = MatchLoop::new(&config)?;
+    let mut writer = RunWriter::create(out)?.keeping_poses(matcher.amends());
     let mut bag = args
         .out_mcap
         .as_deref()
         .map(BagOutput::create)
         .transpose()?;
-    let mut matcher = MatchLoop::new(&config)?;
 
     // Scan by scan: memory holds the matcher's map and the reorder window, not the log.
     let bar = progress_spinner(&config.kind());
@@ -275,7 +275,7 @@ pub fn run(args: MatchArgs) -> Result<()> {
         }
         let (estimate, row) = matcher.push(&record);
         if let Some(amendment) = matcher.take_amendment() {
-            writer.amend(&amendment);
+            writer.amend(&amendment)?;
             if let Some(probe) = &mut probe {
                 probe.amend(|k| amendment.moved(k));
             }

@@ -87,8 +87,8 @@ pub(super) fn run_streamed(
 ) -> Result<MatcherOutcome> {
     let t = Instant::now();
     let kind = matcher.kind();
-    let mut writer = RunWriter::create(dir)?;
     let mut matching = MatchLoop::new(matcher)?;
+    let mut writer = RunWriter::create(dir)?.keeping_poses(matching.amends());
     let mut track = Track::new(source)?;
     let mut per_scan = PerScan::default();
     let truth = source.truth.as_deref();
@@ -108,7 +108,7 @@ pub(super) fn run_streamed(
         .each_record(|record| {
             let (estimate, row) = matching.push(record);
             if let Some(amendment) = matching.take_amendment() {
-                writer.amend(&amendment);
+                writer.amend(&amendment)?;
                 track.amend(&amendment);
             }
             let t = record.timestamp();

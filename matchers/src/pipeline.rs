@@ -392,6 +392,11 @@ pub trait Odometry: Send + std::fmt::Debug {
     fn take_amendment(&mut self) -> Option<Amendment> {
         None
     }
+    /// Whether [`Odometry::take_amendment`] can ever give one: a caller that keeps no
+    /// trajectory otherwise keeps one only then. False by default.
+    fn amends(&self) -> bool {
+        false
+    }
 }
 
 /// The built-in reference policies, for [`Pipeline::new`] (any [`ReferencePolicy`] will do).
@@ -714,6 +719,13 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         true
     }
 
+    /// Whether a re-anchoring is spread over the stretch that drifted: against a map, with
+    /// the checks, re-anchoring and `deform` on. Only then is the trail kept.
+    fn spreads(&self) -> bool {
+        let revisit = self.revisit.params();
+        self.policy.is_map() && self.validator.params.enabled && revisit.enabled && revisit.deform
+    }
+
     /// Spreads a re-anchoring's `correction` (in the world) over the stretch of map and
     /// trajectory that drifted, where the moved stretch fits the old map better
     /// ([`crate::trail`]); otherwise the correction stays a jump.
@@ -863,7 +875,9 @@ where
             }
         }
         let laser = self.reference_frame * result.pose;
-        self.trail.record(&laser);
+        if self.spreads() {
+            self.trail.record(&laser);
+        }
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
         if inserted {
@@ -878,6 +892,8 @@ where
         }
         if inserted && boosted {
             self.revisit.inserted(self.reference.index().len());
+        }
+        if inserted && self.spreads() {
             let scans = self.reference.scans();
             if scans == 1 {
                 self.trail.cleared();
@@ -923,6 +939,10 @@ where
 
     fn take_amendment(&mut self) -> Option<Amendment> {
         self.amendment.take()
+    }
+
+    fn amends(&self) -> bool {
+        self.spreads()
     }
 }
 

@@ -294,6 +294,12 @@ impl MatchLoop {
         self.odometry.take_amendment()
     }
 
+    /// Whether [`MatchLoop::take_amendment`] can ever give one ([`Odometry::amends`]).
+    #[must_use]
+    pub fn amends(&self) -> bool {
+        self.odometry.amends()
+    }
+
     /// The totals so far.
     #[must_use]
     pub fn summary(&self) -> MatchSummary {
@@ -442,9 +448,10 @@ fn write_row<W: Write>(w: &mut W, r: &ScanRow) -> std::io::Result<()> {
 pub struct RunWriter {
     dir: std::path::PathBuf,
     trajectory: OutputFile,
-    /// The poses so far (32 bytes a record), written at [`RunWriter::commit`]: a re-anchoring
-    /// spread over the stretch before it amends them ([`RunWriter::amend`]).
-    poses: Vec<Stamped>,
+    /// The poses so far (32 bytes a record), written at [`RunWriter::commit`], where a
+    /// re-anchoring spread over the stretch before it may amend them ([`RunWriter::amend`]);
+    /// `None` writes each pose as it comes.
+    poses: Option<Vec<Stamped>>,
     matches: OutputFile,
     // Last, so that it is dropped after the files have removed their temporaries.
     made: CreatedDir,
@@ -468,27 +475,45 @@ impl RunWriter {
         Ok(Self {
             dir: dir.to_path_buf(),
             trajectory,
-            poses: Vec::new(),
+            poses: None,
             matches,
             made,
         })
     }
 
+    /// Keeps the poses until [`RunWriter::commit`] when `keep` (for a matcher that may amend
+    /// them, [`MatchLoop::amends`]) instead of writing each as it comes.
+    #[must_use]
+    pub fn keeping_poses(mut self, keep: bool) -> Self {
+        self.poses = keep.then(Vec::new);
+        self
+    }
+
     /// Appends one scan's pose and row.
     pub fn push(&mut self, timestamp: f64, pose: &qicp_core::Pose2, row: &ScanRow) -> Result<()> {
-        self.poses.push((timestamp, *pose));
+        match &mut self.poses {
+            Some(poses) => poses.push((timestamp, *pose)),
+            None => write_tum_pose(&mut self.trajectory, timestamp, pose)
+                .context("writing trajectory.tum")?,
+        }
         write_row(&mut self.matches, row).context("writing matches.csv")?;
         Ok(())
     }
 
-    /// Moves the poses pushed so far as `amendment` says (by their order of pushing).
-    pub fn amend(&mut self, amendment: &Amendment) {
-        amendment.apply(&mut self.poses, |(_, pose)| pose);
+    /// Moves the poses pushed so far as `amendment` says (by their order of pushing). Poses
+    /// already written are not kept and cannot be moved: a writer that may be amended must
+    /// keep them ([`RunWriter::keeping_poses`]).
+    pub fn amend(&mut self, amendment: &Amendment) -> Result<()> {
+        let Some(poses) = &mut self.poses else {
+            anyhow::bail!("trajectory.tum: a correction of poses already written (keep them)");
+        };
+        amendment.apply(poses, |(_, pose)| pose);
+        Ok(())
     }
 
     /// Writes `config.toml` and `summary.json` (when given) and renames every file into place.
     pub fn commit(mut self, config: &MatcherConfig, summary: Option<&str>) -> Result<()> {
-        for (t, pose) in &self.poses {
+        for (t, pose) in self.poses.iter().flatten() {
             write_tum_pose(&mut self.trajectory, *t, pose).context("writing trajectory.tum")?;
         }
         self.trajectory.commit()?;

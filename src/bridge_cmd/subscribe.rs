@@ -81,7 +81,12 @@ pub fn run_subscribe(
     }
     // The outputs are opened before the first scan: a bad --out fails at once, and rows and
     // poses go to disk as they come (renamed into place at the end), not into memory.
-    let mut writer = out.map(RunWriter::create).transpose()?;
+    // A matcher that spreads its re-anchorings keeps the poses until the end instead.
+    let mut matching = MatchLoop::new(config)?;
+    let amends = matching.amends();
+    let mut writer = out
+        .map(|dir| RunWriter::create(dir).map(|w| w.keeping_poses(amends)))
+        .transpose()?;
     // The pose publisher first: a second matcher on the same prefix is refused before it
     // subscribes to the scans (where it would hold a block-mode publisher back).
     let mut poses = PosePublisher::create(&topics).map_err(|e| match e {
@@ -106,7 +111,6 @@ pub fn run_subscribe(
         },
     )?;
     let backpressure = scans.backpressure();
-    let mut matching = MatchLoop::new(config)?;
     let mut rejected = 0u64;
     let mut publish_error = None;
     let mut write_error = None;
@@ -123,8 +127,11 @@ pub fn run_subscribe(
                     let (estimate, row) = matching.push(&record);
                     // The poses published stand; the trajectory written takes the
                     // amendments of a re-anchoring spread over the records before it.
-                    if let (Some(w), Some(amendment)) = (&mut writer, matching.take_amendment()) {
-                        w.amend(&amendment);
+                    if let (Some(w), Some(amendment)) = (&mut writer, matching.take_amendment())
+                        && let Err(e) = w.amend(&amendment)
+                    {
+                        write_error = Some(e);
+                        return ControlFlow::Break(());
                     }
                     if let Some(w) = &mut writer
                         && let Err(e) = w.push(record.timestamp(), &estimate.pose, &row)
