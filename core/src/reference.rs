@@ -279,8 +279,9 @@ pub struct Reference<I> {
     confirmed: Vec<u32>,
     /// Per point: the number of the scan that inserted it ([`Reference::deform`]).
     born: Vec<u32>,
-    /// The side of the cell cap's cells, once a merge used them (m).
+    /// The side of the cell cap's cells and the cap, once a merge used them (m).
     cell_size: f64,
+    cell_cap: u32,
     /// Per point: false once a full cell replaced it; it leaves the index at the next rebuild.
     live: Vec<bool>,
     /// Points replaced and still in the index.
@@ -318,6 +319,7 @@ impl<I: SpatialIndex> Reference<I> {
             confirmed: Vec::new(),
             born: Vec::new(),
             cell_size: 0.0,
+            cell_cap: 0,
             live: Vec::new(),
             stale: 0,
             looks: Vec::new(),
@@ -496,6 +498,7 @@ impl<I: SpatialIndex> Reference<I> {
             && m.max_cell_points > 0
         {
             self.cell_size = m.cell_size;
+            self.cell_cap = m.max_cell_points;
         }
         let held = self.index.len();
         // This scan's number, for the points it inserts or confirms.
@@ -679,9 +682,11 @@ impl<I: SpatialIndex> Reference<I> {
     /// it (as [`Reference::scans`] counted before that insertion; `None` leaves the scan's
     /// points where they are), turning its normal and covariance with it: a stretch of map
     /// laid by drifted scans is laid again where they belong ([`crate::SpatialIndex`] rebuilt,
-    /// cells of the cell cap re-bucketed). Points replaced by a full cell or carved are dropped
-    /// on the way ([`Reference::renumberings`] counts that); otherwise every point keeps its
-    /// id. On error (a point moved out of the index's range) the map is left empty.
+    /// cells of the cell cap re-bucketed: where moved points crowd a cell past its cap, the
+    /// ones confirmed least recently are replaced, as a full cell replaces them). Points
+    /// replaced by a full cell or carved are dropped on the way ([`Reference::renumberings`]
+    /// counts that); otherwise every point keeps its id. On error (a point moved out of the
+    /// index's range) the map is left empty.
     pub fn deform(&mut self, moved: impl Fn(u32) -> Option<Pose2>) -> Result<(), IndexError> {
         let mut points = self.index.points().to_vec();
         for ((p, info), born) in points.iter_mut().zip(&mut self.info).zip(&self.born) {
@@ -713,6 +718,18 @@ impl<I: SpatialIndex> Reference<I> {
                     .entry(cell_of(p, self.cell_size))
                     .or_default()
                     .push(id);
+            }
+            let cap = self.cell_cap as usize;
+            for ids in self.cells.values_mut().filter(|ids| ids.len() > cap) {
+                // The most recently confirmed stay.
+                ids.sort_by_key(|&id| std::cmp::Reverse(self.confirmed[id as usize]));
+                for id in ids.drain(cap..) {
+                    self.live[id as usize] = false;
+                    self.stale += 1;
+                }
+            }
+            if self.stale > 0 && self.stale * STALE_SHARE >= self.info.len() {
+                self.rebuild()?;
             }
         }
         Ok(())

@@ -584,6 +584,13 @@ fn a_deformed_map_holds_one_copy_of_the_walls_and_its_cells_their_cap() {
     map.deform(|scan| (scan >= 5).then_some(drift.inverse()))
         .expect("finite points");
     assert_eq!(off(&map), 0, "every point back on a wall");
+    // Moved onto the old copy, the stretch's points crowd its cells: the cap still holds.
+    let crowded = cell_counts(&map.live_points(), 0.1);
+    assert!(
+        crowded.values().all(|&n| n <= 4),
+        "{:?}",
+        crowded.values().max()
+    );
     // Scans laid after the deformation still fill cells only up to the cap.
     let merge = Merge {
         max_cell_points: 4,
