@@ -849,7 +849,7 @@ where
             && self.validator.params.enabled
             && result.fallback.is_none()
             && self.reanchor(&record.scan, &mut result);
-        if check.reanchored && self.revisit.params().deform {
+        if check.reanchored && self.spreads() {
             self.deform((self.reference_frame * result.pose) * matched.inverse());
         }
         // A refused match stays out of a map, and so does one that odometry contradicts

@@ -40,7 +40,8 @@ struct Visit {
 }
 
 /// The trail of the records and of the scans that entered the map: per record the laser's
-/// path length and whether it was on old ground (9 bytes a record), and the scans' places.
+/// path length and whether it was on old ground (9 bytes a record), and per scan its record
+/// and number, with the first scan laid in each cell.
 #[derive(Debug, Clone, Default)]
 pub struct Trail {
     /// Insertions after which a scan's ground counts as old.
@@ -283,7 +284,7 @@ pub fn moves_fit<I: SpatialIndex>(reference: &Reference<I>, moves: &HashMap<u32,
             .iter()
             .filter(|n| born[n.id as usize] < boundary)
             .map(|n| n.dist_sq.sqrt())
-            .fold(None, |m: Option<f64>, d| Some(m.map_or(d, |m| m.min(d))))
+            .min_by(f64::total_cmp)
     };
     let mut before = Vec::new();
     let mut after = Vec::new();
