@@ -279,8 +279,9 @@ pub struct Reference<I> {
     confirmed: Vec<u32>,
     /// Per point: the number of the scan that inserted it ([`Reference::deform`]).
     born: Vec<u32>,
-    /// The side of the cell cap's cells and the cap, once a merge used them (m).
+    /// The side of the cell cap's cells (m), once a merge used them…
     cell_size: f64,
+    /// … and the cap.
     cell_cap: u32,
     /// Per point: false once a full cell replaced it; it leaves the index at the next rebuild.
     live: Vec<bool>,
@@ -728,8 +729,12 @@ impl<I: SpatialIndex> Reference<I> {
                     self.stale += 1;
                 }
             }
-            if self.stale > 0 && self.stale * STALE_SHARE >= self.info.len() {
-                self.rebuild()?;
+            if self.stale > 0
+                && self.stale * STALE_SHARE >= self.info.len()
+                && let Err(e) = self.rebuild()
+            {
+                self.clear();
+                return Err(e);
             }
         }
         Ok(())
