@@ -134,8 +134,8 @@ impl Job {
         self.run_writing(records, relations, None, None)
     }
 
-    /// [`Job::run_on`], writing every pose to `trajectory` (TUM lines) as it is estimated and
-    /// keeping it in `keep`, as asked.
+    /// [`Job::run_on`], writing the trajectory to `trajectory` (TUM lines) when the run ends,
+    /// with any amendments of a spread re-anchoring, and keeping it in `keep`, as asked.
     pub fn run_writing(
         &self,
         records: impl Iterator<Item = Result<Record>>,
