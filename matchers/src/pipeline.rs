@@ -747,10 +747,15 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             self.view = None;
             return;
         }
-        // The last scan in the map saw from where it now lies.
-        if let Some(view) = &mut self.view {
-            let last = self.trail.last_scan_record().unwrap_or(amendment.first);
-            *view = view.moved(&amendment.partial(last.saturating_sub(amendment.first)));
+        // The last scan in the map saw from where it now lies (one laid before the stretch
+        // did not move).
+        if let Some(view) = &mut self.view
+            && let Some(by) = self
+                .trail
+                .last_scan_record()
+                .and_then(|last| amendment.moved(last))
+        {
+            *view = view.moved(&by);
         }
         self.trail.anchored();
         self.amendment = Some(amendment);
