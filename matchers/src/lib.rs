@@ -63,6 +63,6 @@ pub use params::{Acts, Param, Range};
 pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance};
 pub use policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 pub use registry::{Algorithm, AnyIndex, IndexEntry, Metric, ReferenceEntry, Registry};
-pub use revisit::{Proposal, Revisit, RevisitParams};
+pub use revisit::{Proposal, Revisit, RevisitParams, Vouch};
 pub use validation::{Check, FieldOfView, Fit, Level, ValidationParams, Validator};
 pub use wsm::{Wsm, WsmAlgorithm, WsmParams};

@@ -730,7 +730,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// trajectory that drifted, where the moved stretch fits the old map better
     /// ([`crate::trail`]); otherwise the correction stays a jump.
     fn deform(&mut self, correction: Pose2) {
-        let Some(amendment) = self.trail.amendment(correction) else {
+        let (revisit, reference) = (&mut self.revisit, &self.reference);
+        let Some(amendment) = self
+            .trail
+            .amendment(correction, |vouch| revisit.pins(reference, vouch))
+        else {
             return;
         };
         let moves = self.trail.scan_moves(&amendment);
@@ -854,6 +858,7 @@ where
             && self.validator.params.enabled
             && result.fallback.is_none()
             && self.reanchor(&record.scan, &mut result);
+        let vouched = self.revisit.take_vouched();
         if check.reanchored && self.spreads() {
             self.deform((self.reference_frame * result.pose) * matched.inverse());
         }
@@ -882,6 +887,12 @@ where
         let laser = self.reference_frame * result.pose;
         if self.spreads() {
             self.trail.record(&laser);
+            // The old map explained this match nearly whole, and the match stands.
+            if let Some(vouch) = vouched
+                && result.fallback.is_none()
+            {
+                self.trail.vouched(vouch);
+            }
         }
         let protect = boosted && (check.refused || check.withheld);
         let inserted = !protect && self.update_reference(record, &laser, &result);
@@ -894,6 +905,7 @@ where
         if boosted && self.reference.renumberings() != self.renumberings {
             self.renumberings = self.reference.renumberings();
             self.revisit.renumbered();
+            self.trail.unvouched();
         }
         if inserted && boosted {
             self.revisit.inserted(self.reference.index().len());

@@ -17,9 +17,13 @@
 //! correction (`confirmations`, `confirm_gap`). The re-anchored match is not withheld by
 //! odometry's veto: it corrects drift that odometry cannot see.
 //!
-//! This is a local correction, not a loop closure: the drifted stretch of map stays where it
-//! was laid, and the estimate jumps by the drift. It helps where the drift is small enough to
-//! be found in the window (`window_xy`, `window_deg`) and the old map is unambiguous there.
+//! This is a local correction, not a loop closure solved over a graph: the estimate is moved
+//! by the drift, and with `deform` (the default) the correction is spread over the stretch of
+//! map and trajectory that drifted ([`crate::trail`]); without it the drifted stretch stays
+//! where it was laid and the estimate jumps. It helps where the drift is small enough to be
+//! found in the window (`window_xy`, `window_deg`) and the old map is unambiguous there. A
+//! look-up that finds the old map explaining the match nearly whole, and pinning it
+//! ([`Revisit::pins`]), vouches for it: the spread does not reach back past it.
 
 use crate::ConfigError;
 use crate::correlative::{CorrelativeParams, CorrelativeSearch};
@@ -192,6 +196,24 @@ pub struct Revisit {
     /// The run of agreeing look-ups so far: the matched count of the latest, its correction
     /// (re-anchored pose ∘ match⁻¹) and how many agreed.
     run: Option<(usize, Pose2, usize)>,
+    /// The match of the latest call of [`Revisit::propose`], where it looked the match up and
+    /// found the old map explaining it nearly whole.
+    vouched: Option<Vouch>,
+}
+
+/// A match a look-up found the old map explaining nearly whole (within `min_gain` of the
+/// whole scan). Whether the old map also pins it ([`Revisit::pins`]) is asked only where a
+/// spread needs to know, so the scan is kept with it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Vouch {
+    /// The scan's points in its own frame.
+    local: Vec<Point2<f64>>,
+    /// The match.
+    pose: Pose2,
+    /// Points with ids below this were the old map.
+    below: u32,
+    /// The old map's score of the match.
+    score: f64,
 }
 
 /// Look-ups with the default parameters, the search's window theirs (a derived default would
@@ -215,6 +237,7 @@ impl Revisit {
             sizes: VecDeque::new(),
             matched: 0,
             run: None,
+            vouched: None,
         }
     }
 
@@ -256,6 +279,7 @@ impl Revisit {
             return None;
         }
         self.matched += 1;
+        self.vouched = None;
         if !self.matched.is_multiple_of(self.params.every)
             || self.sizes.len() <= self.params.age_scans
         {
@@ -268,6 +292,12 @@ impl Revisit {
         // (scores are at most 1): the usual case, answered without drawing the raster.
         let here = self.search.score_among(reference, local, pose, below)?;
         if here + self.params.min_gain > 1.0 {
+            self.vouched = Some(Vouch {
+                local: local.to_vec(),
+                pose: *pose,
+                below,
+                score: here,
+            });
             return None;
         }
         let min_score = (1.0 - self.params.max_miss).max(here + self.params.min_gain);
@@ -279,6 +309,47 @@ impl Revisit {
             score: best.score,
             below,
         })
+    }
+
+    /// Whether the old map pins the match `vouch` holds: every pose [`AGREE_XY`] beside it,
+    /// in any direction, would explain the scan at least [`KEEP_SCORE`] worse (the score's
+    /// tolerance elsewhere). The least loss over the directions comes from the score's
+    /// curvature, taken by central differences along x, y and the diagonal. Along a corridor
+    /// the old walls explain a slid match nearly as well, so they vouch for no place along
+    /// it. Asked of a map whose old points are those of the look-up (ids are kept until the
+    /// map is renumbered).
+    pub fn pins<I: SpatialIndex>(&mut self, reference: &Reference<I>, vouch: &Vouch) -> bool {
+        let (pose, d) = (vouch.pose, AGREE_XY);
+        let mut loss = |dx: f64, dy: f64| {
+            let mut pair = 0.0;
+            for sign in [1.0, -1.0] {
+                let beside = Pose2::new(pose.x + sign * dx, pose.y + sign * dy, pose.theta);
+                pair += vouch.score
+                    - self
+                        .search
+                        .score_among(reference, &vouch.local, &beside, vouch.below)?;
+            }
+            // Half the summed loss of the two sides: the curvature's part, the slope's cancels.
+            Some(pair / 2.0)
+        };
+        let (Some(lx), Some(ly), Some(ld)) = (loss(d, 0.0), loss(0.0, d), loss(d, d)) else {
+            return false;
+        };
+        // The loss along a unit direction u at distance d is uᵀ L u, where L holds lx and ly on
+        // its diagonal and, off it, the part of the diagonal step's loss the axes do not
+        // explain.
+        let lxy = (ld - lx - ly) / 2.0;
+        let mean = (lx + ly) / 2.0;
+        let least = mean - ((lx - ly) * (lx - ly) / 4.0 + lxy * lxy).sqrt();
+        least >= KEEP_SCORE
+    }
+
+    /// The match of the latest [`Revisit::propose`], if it looked the match up and found the
+    /// old map explaining it nearly whole (no pose of the window could gain `min_gain` on
+    /// it): where the old map also pins it ([`Revisit::pins`]), drift found later grew after
+    /// it. Clears it.
+    pub fn take_vouched(&mut self) -> Option<Vouch> {
+        self.vouched.take()
     }
 
     /// Counts a confirmed re-anchoring of the match `matched` to `reanchored` found by this

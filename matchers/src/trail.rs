@@ -14,8 +14,10 @@
 //! of it at the re-anchored record, as a pose graph with one loop and equal steps would
 //! spread it. Where the robot had been back on old ground for more than `age_scans` records
 //! before the re-anchoring, the drift grew there instead, against the recent points it laid
-//! over the old ones, and the spread covers that run alone. The map's points move with the
-//! scan that laid them, and the trajectory with them ([`Amendment`]).
+//! over the old ones, and the spread covers that run alone, from the last record whose match
+//! a look-up found the old map explaining nearly whole ([`Trail::vouched`]): up to there the
+//! estimate agreed with the old map. The map's points move with the scan that laid them, and
+//! the trajectory with them ([`Amendment`]).
 //!
 //! A spread is checked before it is made, as a loop closure is checked before it enters a
 //! pose graph: the moved stretch must lie nearer the map laid before it, where they overlap,
@@ -23,12 +25,18 @@
 //! of corridor like another) would bend a stretch that agreed with the old map off it; such
 //! a correction stays a jump of the estimate, as without the spread.
 
+use crate::revisit::Vouch;
 use qicp_core::{Point2, Pose2, Reference, SpatialIndex};
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 
 /// The side of the cells that tell old ground (m): a scan laid in a cell, or beside one,
 /// where a scan was laid `age_scans` insertions before it is on old ground.
 const GROUND_CELL: f64 = 2.0;
+
+/// The newest vouched-for matches a trail keeps of its run on old ground (each with its
+/// scan, 16 bytes a point): at one look-up in five matched scans, the last 1,000 records.
+/// Where none of them is pinned, the spread covers the whole run, as without them.
+const MAX_VOUCHES: usize = 200;
 
 /// A scan that entered the map.
 #[derive(Debug, Clone, Copy)]
@@ -58,6 +66,9 @@ pub struct Trail {
     anchored: usize,
     /// Per cell of [`GROUND_CELL`]: the number of the first insertion laid in it.
     first_in: HashMap<(i64, i64), usize>,
+    /// The newest matches of the current run on old ground that a look-up found the old map
+    /// explaining nearly whole, with their records ([`Trail::vouched`]).
+    vouches: VecDeque<(usize, Vouch)>,
 }
 
 /// The cell of [`GROUND_CELL`] holding the laser at `laser`. Finite poses (the pipeline's)
@@ -162,6 +173,10 @@ impl Trail {
                 })
             });
         self.old_ground.push(old);
+        // A record on new ground ends the run the kept matches vouched for.
+        if !old {
+            self.vouches.clear();
+        }
     }
 
     /// Notes that the scan of the last record noted entered the map as scan `stamp`, laid
@@ -176,8 +191,28 @@ impl Trail {
         self.visits.push(Visit { record, stamp });
     }
 
+    /// Notes that a look-up found the old map explaining the last record's match nearly
+    /// whole ([`crate::revisit::Revisit::take_vouched`]): if the old map also pins it, the
+    /// estimate agreed with the old map there.
+    pub fn vouched(&mut self, vouch: Vouch) {
+        let Some(record) = self.path.len().checked_sub(1) else {
+            return;
+        };
+        if self.vouches.len() == MAX_VOUCHES {
+            self.vouches.pop_front();
+        }
+        self.vouches.push_back((record, vouch));
+    }
+
+    /// Forgets the vouched-for matches: the map's ids changed, and the old map they were
+    /// scored in with them.
+    pub fn unvouched(&mut self) {
+        self.vouches.clear();
+    }
+
     /// Forgets every scan (the map was cleared): no record before it is spread over again.
     pub fn cleared(&mut self) {
+        self.vouches.clear();
         self.visits.clear();
         self.first_in.clear();
         self.anchored = self.path.len();
@@ -185,9 +220,15 @@ impl Trail {
 
     /// The amendment that spreads `correction`, found at the record about to be noted, over
     /// the stretch that drifted, or `None` when the trail shows none (no record on new
-    /// ground since the last one spread over).
+    /// ground since the last one spread over). `pinned` tells whether the old map pins a
+    /// vouched-for match ([`crate::revisit::Revisit::pins`]); it is asked, newest first,
+    /// only of the matches of a long run on old ground.
     #[must_use]
-    pub fn amendment(&self, correction: Pose2) -> Option<Amendment> {
+    pub fn amendment(
+        &self,
+        correction: Pose2,
+        mut pinned: impl FnMut(&Vouch) -> bool,
+    ) -> Option<Amendment> {
         let old = &self.old_ground;
         let anchored = self.anchored.min(old.len());
         // Back from the newest record: the run on old ground that leads to the revisit…
@@ -205,9 +246,22 @@ impl Trail {
         }
         // Back on old ground for long before the re-anchoring, the robot's estimate drifted
         // there, against the recent points it laid over the old ones: the spread covers
-        // that run alone.
+        // that run alone, from the last record whose match the old map vouched for (it
+        // still agreed with the old map; the drift grew after it).
         if old.len() - back > self.age {
             first = back;
+            if let Some((record, _)) = self
+                .vouches
+                .iter()
+                .rev()
+                .take_while(|(record, _)| *record >= back)
+                .find(|(_, vouch)| pinned(vouch))
+            {
+                first = record + 1;
+            }
+        }
+        if first >= old.len() {
+            return None;
         }
         // The last record on old ground takes none of it (the map's first is on old ground).
         let from = self.path[first.saturating_sub(1)];
@@ -233,6 +287,7 @@ impl Trail {
     /// now lie on the old map, and a later correction is spread only over records after
     /// them.
     pub fn anchored(&mut self) {
+        self.vouches.clear();
         self.anchored = self.path.len();
     }
 
@@ -337,7 +392,9 @@ mod tests {
         let poses = square_loop(1, 0.0);
         let t = trail(10, &poses);
         let correction = Pose2::new(0.5, -0.2, 0.02);
-        let a = t.amendment(correction).expect("a stretch on new ground");
+        let a = t
+            .amendment(correction, |_| true)
+            .expect("a stretch on new ground");
         // Old ground reaches 3 m from the origin (its 2 m cell and the cells beside it): the
         // stretch begins at (4, 0), record 18, and runs on to the last record, (0, 1), which
         // takes all of it.
@@ -373,7 +430,9 @@ mod tests {
                 t.inserted(k as u32, p);
             }
         }
-        let a = t.amendment(Pose2::new(0.5, 0.0, 0.0)).expect("a stretch");
+        let a = t
+            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
+            .expect("a stretch");
         assert_eq!(a.records(), 18..poses.len());
     }
 
@@ -385,7 +444,80 @@ mod tests {
         assert_eq!((poses[91].x, poses[91].y), (0.0, 3.0));
         poses.extend((0..150).map(|k| Pose2::new(0.1 * k as f64, 0.5, 0.0)));
         let t = trail(10, &poses);
-        let a = t.amendment(Pose2::new(0.5, 0.0, 0.0)).expect("a stretch");
+        let a = t
+            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
+            .expect("a stretch");
+        assert_eq!(a.records(), 91..poses.len());
+    }
+
+    #[test]
+    fn a_drift_on_old_ground_is_spread_from_the_last_match_the_old_map_vouched_for() {
+        // As above, but look-ups found the old map explaining the matches of records 150 and
+        // 200 nearly whole, and pinning them: the drift grew after the later one, and the
+        // records before keep their poses.
+        let mut poses = square_loop(0, 0.0);
+        poses.extend((0..150).map(|k| Pose2::new(0.1 * k as f64, 0.5, 0.0)));
+        let mut t = Trail::new(10);
+        for (k, p) in poses.iter().enumerate() {
+            t.record(p);
+            t.inserted(k as u32, p);
+            if k == 150 || k == 200 {
+                t.vouched(Vouch::default());
+            }
+        }
+        let a = t
+            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
+            .expect("a stretch");
+        assert_eq!(a.records(), 201..poses.len());
+        // 0.1 m a record from record 200 on.
+        let expected = 1.0 / (poses.len() - 201) as f64;
+        assert!((a.shares[0] - expected).abs() < 1e-12, "{}", a.shares[0]);
+        // Where the old map does not pin record 200's match (a corridor), the one before it
+        // that it pins starts the stretch; where it pins none, the whole run.
+        let mut asked = 0;
+        let a = t
+            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| {
+                asked += 1;
+                asked == 2
+            })
+            .expect("a stretch");
+        assert_eq!((a.first, asked), (151, 2));
+        let a = t
+            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| false)
+            .expect("a stretch");
+        assert_eq!(a.records(), 91..poses.len());
+    }
+
+    #[test]
+    fn a_vouched_match_before_the_run_on_old_ground_leaves_the_stretch_as_it_is() {
+        // Vouched for on the first leg, before the loop: the loop's stretch is spread whole,
+        // and so is a long run on old ground whose own look-ups vouched for nothing.
+        let poses = square_loop(1, 0.0);
+        let mut t = Trail::new(10);
+        for (k, p) in poses.iter().enumerate() {
+            t.record(p);
+            t.inserted(k as u32, p);
+            if k == 16 {
+                t.vouched(Vouch::default());
+            }
+        }
+        let a = t
+            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
+            .expect("a stretch");
+        assert_eq!(a.records(), 18..poses.len());
+        let mut poses = square_loop(0, 0.0);
+        poses.extend((0..150).map(|k| Pose2::new(0.1 * k as f64, 0.5, 0.0)));
+        let mut t = Trail::new(10);
+        for (k, p) in poses.iter().enumerate() {
+            t.record(p);
+            t.inserted(k as u32, p);
+            if k == 50 {
+                t.vouched(Vouch::default());
+            }
+        }
+        let a = t
+            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
+            .expect("a stretch");
         assert_eq!(a.records(), 91..poses.len());
     }
 
@@ -394,20 +526,26 @@ mod tests {
         let poses: Vec<Pose2> = (0..40)
             .map(|k| Pose2::new(0.05 * k as f64, 0.0, 0.0))
             .collect();
-        assert_eq!(trail(10, &poses).amendment(Pose2::new(0.3, 0.0, 0.0)), None);
-        assert_eq!(Trail::new(10).amendment(Pose2::new(0.3, 0.0, 0.0)), None);
+        assert_eq!(
+            trail(10, &poses).amendment(Pose2::new(0.3, 0.0, 0.0), |_| true),
+            None
+        );
+        assert_eq!(
+            Trail::new(10).amendment(Pose2::new(0.3, 0.0, 0.0), |_| true),
+            None
+        );
     }
 
     #[test]
     fn a_stretch_spread_over_once_is_old_ground_for_the_next_correction() {
         let mut t = trail(10, &square_loop(1, 0.0));
         t.anchored();
-        assert_eq!(t.amendment(Pose2::new(0.1, 0.0, 0.0)), None);
+        assert_eq!(t.amendment(Pose2::new(0.1, 0.0, 0.0), |_| true), None);
         // A second loop 30 m up the y axis, all new ground, back near its start.
         let n = t.records();
         extend(&mut t, &square_loop(1, 30.0)[15..]);
         let a = t
-            .amendment(Pose2::new(0.1, 0.0, 0.0))
+            .amendment(Pose2::new(0.1, 0.0, 0.0), |_| true)
             .expect("the second loop");
         assert_eq!(a.first, n);
     }

@@ -1,6 +1,6 @@
 //! Re-anchoring on a revisit, on a room whose map holds an old copy and a drifted recent one:
 //! a match that fits the recent copy is moved back onto the old one, and a map without drift
-//! is left alone.
+//! is left alone (the old map vouches for its match).
 
 use qicp_core::testdata::SyntheticWorld;
 use qicp_core::{MutualNearest, Pose2, QuadTree, Reference, ScanMatcher, SpatialIndex};
@@ -98,6 +98,58 @@ fn a_map_without_drift_is_left_alone() {
     let truth = pose(4);
     let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
     assert_eq!(revisit.propose(&reference, scan.points(), &truth), None);
+    // The old map explained the match nearly whole: it vouches for it, once, and the room's
+    // walls pin it.
+    let vouch = revisit.take_vouched().expect("vouched for");
+    assert!(revisit.take_vouched().is_none());
+    assert!(revisit.pins(&reference, &vouch));
+}
+
+/// In a corridor with no feature along it the old walls explain a match slid along it as
+/// well: they vouch for the match, but do not pin it.
+#[test]
+fn an_old_map_of_a_featureless_corridor_vouches_for_a_match_but_does_not_pin_it() {
+    let corridor = SyntheticWorld::featureless_corridor();
+    let at = |k: usize| Pose2::new(0.5 * k as f64, 0.1, 0.02 * k as f64);
+    let mut revisit = look_ups();
+    let mut reference = Reference::new(QuadTree::default());
+    for k in 0..OLD + 3 {
+        let scan = corridor.scan(&at(k % OLD), 0.005, k as u64 + 1);
+        reference
+            .insert_scan(&scan, &at(k % OLD), None)
+            .expect("finite");
+        revisit.inserted(reference.index().len());
+    }
+    let truth = at(1);
+    let scan = corridor.scan(&truth, 0.005, 99);
+    assert_eq!(revisit.propose(&reference, scan.points(), &truth), None);
+    let vouch = revisit.take_vouched().expect("vouched for");
+    assert!(!revisit.pins(&reference, &vouch));
+}
+
+#[test]
+fn the_old_map_vouches_only_for_a_match_it_explains_nearly_whole() {
+    let drift = Pose2::new(0.45, -0.3, 1.5f64.to_radians());
+    let mut revisit = look_ups();
+    let reference = map(drift, 3, &mut revisit);
+    let truth = pose(4);
+    let scan = SyntheticWorld::room().scan(&truth, 0.005, 99);
+    assert!(
+        revisit
+            .propose(&reference, scan.points(), &(drift * truth))
+            .is_some()
+    );
+    assert!(revisit.take_vouched().is_none(), "a drifted match");
+    // A scan not due for a look-up is vouched for by none.
+    let mut sparse = Revisit::new(RevisitParams {
+        every: 2,
+        ..*look_ups().params()
+    });
+    let reference = map(Pose2::IDENTITY, 3, &mut sparse);
+    assert_eq!(sparse.propose(&reference, scan.points(), &truth), None);
+    assert!(sparse.take_vouched().is_none(), "not looked up");
+    assert_eq!(sparse.propose(&reference, scan.points(), &truth), None);
+    assert!(sparse.take_vouched().is_some(), "looked up");
 }
 
 #[test]
