@@ -436,18 +436,45 @@ mod tests {
         assert_eq!(a.records(), 18..poses.len());
     }
 
-    #[test]
-    fn a_drift_found_long_after_coming_back_is_spread_over_the_run_on_old_ground() {
-        // Back on old ground at (0, 3), record 91, then 150 records along the first leg again
-        // before the re-anchoring: the drift grew there.
+    /// The square loop back to (0, 0), then 150 records along its first leg again: a run of
+    /// 150 records on old ground from record 91, (0, 3), on.
+    fn long_run_on_old_ground() -> Vec<Pose2> {
         let mut poses = square_loop(0, 0.0);
         assert_eq!((poses[91].x, poses[91].y), (0.0, 3.0));
         poses.extend((0..150).map(|k| Pose2::new(0.1 * k as f64, 0.5, 0.0)));
-        let t = trail(10, &poses);
-        let a = t
-            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
-            .expect("a stretch");
-        assert_eq!(a.records(), 91..poses.len());
+        poses
+    }
+
+    /// A trail of `poses`, each record's scan entering the map, the matches of the records
+    /// `vouched` vouched for by a look-up.
+    fn vouched_trail(poses: &[Pose2], vouched: &[usize]) -> Trail {
+        let mut t = Trail::new(10);
+        for (k, p) in poses.iter().enumerate() {
+            t.record(p);
+            t.inserted(k as u32, p);
+            if vouched.contains(&k) {
+                t.vouched(Vouch::default());
+            }
+        }
+        t
+    }
+
+    /// The amendment of a correction of 0.5 m along x, `pinned` telling which vouched-for
+    /// matches the old map pins.
+    fn spread(t: &Trail, pinned: impl FnMut(&Vouch) -> bool) -> Amendment {
+        t.amendment(Pose2::new(0.5, 0.0, 0.0), pinned)
+            .expect("a stretch")
+    }
+
+    #[test]
+    fn a_drift_found_long_after_coming_back_is_spread_over_the_run_on_old_ground() {
+        // Back on old ground at record 91, then 150 records before the re-anchoring: the
+        // drift grew there.
+        let poses = long_run_on_old_ground();
+        assert_eq!(
+            spread(&trail(10, &poses), |_| true).records(),
+            91..poses.len()
+        );
     }
 
     #[test]
@@ -455,19 +482,9 @@ mod tests {
         // As above, but look-ups found the old map explaining the matches of records 150 and
         // 200 nearly whole, and pinning them: the drift grew after the later one, and the
         // records before keep their poses.
-        let mut poses = square_loop(0, 0.0);
-        poses.extend((0..150).map(|k| Pose2::new(0.1 * k as f64, 0.5, 0.0)));
-        let mut t = Trail::new(10);
-        for (k, p) in poses.iter().enumerate() {
-            t.record(p);
-            t.inserted(k as u32, p);
-            if k == 150 || k == 200 {
-                t.vouched(Vouch::default());
-            }
-        }
-        let a = t
-            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
-            .expect("a stretch");
+        let poses = long_run_on_old_ground();
+        let t = vouched_trail(&poses, &[150, 200]);
+        let a = spread(&t, |_| true);
         assert_eq!(a.records(), 201..poses.len());
         // 0.1 m a record from record 200 on.
         let expected = 1.0 / (poses.len() - 201) as f64;
@@ -475,17 +492,12 @@ mod tests {
         // Where the old map does not pin record 200's match (a corridor), the one before it
         // that it pins starts the stretch; where it pins none, the whole run.
         let mut asked = 0;
-        let a = t
-            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| {
-                asked += 1;
-                asked == 2
-            })
-            .expect("a stretch");
+        let a = spread(&t, |_| {
+            asked += 1;
+            asked == 2
+        });
         assert_eq!((a.first, asked), (151, 2));
-        let a = t
-            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| false)
-            .expect("a stretch");
-        assert_eq!(a.records(), 91..poses.len());
+        assert_eq!(spread(&t, |_| false).records(), 91..poses.len());
     }
 
     #[test]
@@ -493,31 +505,10 @@ mod tests {
         // Vouched for on the first leg, before the loop: the loop's stretch is spread whole,
         // and so is a long run on old ground whose own look-ups vouched for nothing.
         let poses = square_loop(1, 0.0);
-        let mut t = Trail::new(10);
-        for (k, p) in poses.iter().enumerate() {
-            t.record(p);
-            t.inserted(k as u32, p);
-            if k == 16 {
-                t.vouched(Vouch::default());
-            }
-        }
-        let a = t
-            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
-            .expect("a stretch");
+        let a = spread(&vouched_trail(&poses, &[16]), |_| true);
         assert_eq!(a.records(), 18..poses.len());
-        let mut poses = square_loop(0, 0.0);
-        poses.extend((0..150).map(|k| Pose2::new(0.1 * k as f64, 0.5, 0.0)));
-        let mut t = Trail::new(10);
-        for (k, p) in poses.iter().enumerate() {
-            t.record(p);
-            t.inserted(k as u32, p);
-            if k == 50 {
-                t.vouched(Vouch::default());
-            }
-        }
-        let a = t
-            .amendment(Pose2::new(0.5, 0.0, 0.0), |_| true)
-            .expect("a stretch");
+        let poses = long_run_on_old_ground();
+        let a = spread(&vouched_trail(&poses, &[50]), |_| true);
         assert_eq!(a.records(), 91..poses.len());
     }
 
