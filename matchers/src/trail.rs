@@ -15,9 +15,10 @@
 //! spread it. Where the robot had been back on old ground for more than `age_scans` records
 //! before the re-anchoring, the drift grew there instead, against the recent points it laid
 //! over the old ones, and the spread covers that run alone, from the last record whose match
-//! a look-up found the old map explaining nearly whole ([`Trail::vouched`]): up to there the
-//! estimate agreed with the old map. The map's points move with the scan that laid them, and
-//! the trajectory with them ([`Amendment`]).
+//! a look-up found the old map explaining nearly whole ([`Trail::vouched`]) and pinning (a
+//! match slid along a corridor is explained as well): up to there the estimate agreed with
+//! the old map. The map's points move with the scan that laid them, and the trajectory with
+//! them ([`Amendment`]).
 //!
 //! A spread is checked before it is made, as a loop closure is checked before it enters a
 //! pose graph: the moved stretch must lie nearer the map laid before it, where they overlap,
@@ -246,8 +247,8 @@ impl Trail {
         }
         // Back on old ground for long before the re-anchoring, the robot's estimate drifted
         // there, against the recent points it laid over the old ones: the spread covers
-        // that run alone, from the last record whose match the old map vouched for (it
-        // still agreed with the old map; the drift grew after it).
+        // that run alone, from the last record whose match the old map vouched for and pins
+        // (it still agreed with the old map; the drift grew after it).
         if old.len() - back > self.age {
             first = back;
             if let Some((record, _)) = self
