@@ -365,9 +365,10 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     let world = SyntheticWorld::room();
     // The default spacing (WSM's 1 cm, IDC's 2 cm) and a full cell replacing its stalest
     // point, without the surface band and the novelty gate, which would keep most of the
-    // revisits' points out before the cell cap sees them. The room's walls, 2 m off, are sampled every few
-    // centimetres: a look puts two or three points into a 10 cm cell, so the default cap of
-    // 20 would bind only after many more loops; a cap of 6 binds within three.
+    // revisits' points out before the cell cap sees them. The room's walls, 2 m off, are
+    // sampled every few centimetres: a look puts two or three points into a 10 cm cell, so
+    // the default cap of 20 would bind only after many more loops; a cap of 6 binds within
+    // three.
     for (kind, cap) in [(MatcherKind::QWsm, 0.01), (MatcherKind::QIdc, 0.02)] {
         let mut config = MatcherConfig::defaults(kind);
         config.relevance.surface_band_sigmas = Some(0.0);
