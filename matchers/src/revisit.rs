@@ -292,12 +292,15 @@ impl Revisit {
         // (scores are at most 1): the usual case, answered without drawing the raster.
         let here = self.search.score_among(reference, local, pose, below)?;
         if here + self.params.min_gain > 1.0 {
-            self.vouched = Some(Vouch {
-                local: local.to_vec(),
-                pose: *pose,
-                below,
-                score: here,
-            });
+            // Only a spread reads a vouch: without `deform` the scan's points are not copied.
+            if self.params.deform {
+                self.vouched = Some(Vouch {
+                    local: local.to_vec(),
+                    pose: *pose,
+                    below,
+                    score: here,
+                });
+            }
             return None;
         }
         let min_score = (1.0 - self.params.max_miss).max(here + self.params.min_gain);
@@ -347,7 +350,7 @@ impl Revisit {
     /// The match of the latest [`Revisit::propose`], if it looked the match up and found the
     /// old map explaining it nearly whole (no pose of the window could gain `min_gain` on
     /// it): where the old map also pins it ([`Revisit::pins`]), drift found later grew after
-    /// it. Clears it.
+    /// it. None without `deform`, where no spread reads it. Clears it.
     pub fn take_vouched(&mut self) -> Option<Vouch> {
         self.vouched.take()
     }

@@ -150,6 +150,14 @@ fn the_old_map_vouches_only_for_a_match_it_explains_nearly_whole() {
     assert!(sparse.take_vouched().is_none(), "not looked up");
     assert_eq!(sparse.propose(&reference, scan.points(), &truth), None);
     assert!(sparse.take_vouched().is_some(), "looked up");
+    // Without `deform` no spread reads a vouch, and none is kept (nor the scan copied).
+    let mut jumps = Revisit::new(RevisitParams {
+        deform: false,
+        ..*look_ups().params()
+    });
+    let reference = map(Pose2::IDENTITY, 3, &mut jumps);
+    assert_eq!(jumps.propose(&reference, scan.points(), &truth), None);
+    assert!(jumps.take_vouched().is_none(), "kept without deform");
 }
 
 #[test]
