@@ -451,8 +451,7 @@ mod tests {
     fn vouched_trail(poses: &[Pose2], vouched: &[usize]) -> Trail {
         let mut t = Trail::new(10);
         for (k, p) in poses.iter().enumerate() {
-            t.record(p);
-            t.inserted(k as u32, p);
+            extend(&mut t, std::slice::from_ref(p));
             if vouched.contains(&k) {
                 t.vouched(Vouch::default());
             }
