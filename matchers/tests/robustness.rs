@@ -2,7 +2,7 @@
 //! a start 20° off is recovered by the correlative search, and a wrong match does not enter
 //! the map.
 
-use qicp_core::testdata::SyntheticWorld;
+use qicp_core::testdata::{SplitMix, SyntheticWorld};
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, MutualNearest, Pose2, QuadTree,
     Record, Reference, Scan, ScanMatcher, SpatialIndex,
@@ -441,6 +441,91 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     }
     println!("full density: {sizes:?}");
     assert!(sizes[2] as f64 > 2.5 * sizes[0] as f64, "{sizes:?}");
+}
+
+/// The room with a bush at scan `k`: its leaves (posts of 1 cm) lie each scan somewhere
+/// else within 0.4 m of the bush's centre, as a laser's returns from foliage do.
+fn room_with_bush(k: usize) -> SyntheticWorld {
+    let mut world = SyntheticWorld::room();
+    let mut rng = SplitMix::new(k as u64 + 1);
+    for _ in 0..60 {
+        let (r, a) = (0.4 * rng.unit().sqrt(), rng.range(0.0, std::f64::consts::TAU));
+        world.posts.push((-3.3 + r * a.cos(), -2.4 + r * a.sin(), 0.01));
+    }
+    world
+}
+
+/// The room on loop `lap`: three carts stand each loop somewhere else within 0.4 m of their
+/// places, as furniture moved between visits does.
+fn room_with_carts_moved(lap: usize) -> SyntheticWorld {
+    let mut world = SyntheticWorld::room();
+    let mut rng = SplitMix::new(lap as u64 + 1);
+    for (x, y) in [(-3.3, -2.6), (-3.6, 2.6), (3.8, 1.6)] {
+        world
+            .posts
+            .push((x + rng.range(-0.4, 0.4), y + rng.range(-0.4, 0.4), 0.3));
+    }
+    world
+}
+
+/// Map points after each of `laps` loops of the room, the room on scan `k` of loop `lap`
+/// being `world(lap, k)`.
+fn clutter_run(
+    config: &MatcherConfig,
+    laps: usize,
+    world: impl Fn(usize, usize) -> SyntheticWorld,
+) -> Vec<usize> {
+    let mut pipeline = config.build().expect("builds");
+    let mut sizes = Vec::new();
+    for lap in 0..laps {
+        for k in 40 * lap..40 * (lap + 1) {
+            let e = pipeline.process(&loop_record(&world(lap, k), k));
+            assert!(
+                e.pose.distance(&on_loop(k)) < 0.05,
+                "{} step {k}: {e:?}",
+                config.kind()
+            );
+        }
+        sizes.push(pipeline.live_points().len());
+    }
+    sizes
+}
+
+#[test]
+fn clutter_that_moves_stops_growing_the_default_maps_once_its_ground_is_covered() {
+    // Clutter puts points off every surface the map holds, so the surface band lets them
+    // all in. With the defaults the novelty gate still stops the map: once the ground the
+    // clutter moves over holds points within the novelty distance (5 cm) of its returns, a
+    // scan adds nothing there. Without the gate every relevant scan adds its leaves.
+    const LAPS: usize = 30;
+    let bush = |_lap: usize, k: usize| room_with_bush(k);
+    let carts = |lap: usize, _k: usize| room_with_carts_moved(lap);
+    for kind in [MatcherKind::QWsm, MatcherKind::QIdc] {
+        let config = MatcherConfig::defaults(kind);
+        // Foliage changes on every scan: covered within a few loops.
+        let foliage = clutter_run(&config, LAPS, bush);
+        assert!(
+            foliage[LAPS - 1] as f64 <= 1.02 * foliage[9] as f64,
+            "{kind}: the map grows after ten loops by the bush ({foliage:?})"
+        );
+        let mut ungated = config.clone();
+        ungated.relevance.min_novelty = Some(0.0);
+        let ungated = clutter_run(&ungated, LAPS, bush);
+        assert!(
+            ungated[LAPS - 1] as f64 > 1.1 * ungated[9] as f64,
+            "{kind}: without the gate the bush must keep growing the map ({ungated:?})"
+        );
+        // Carts moved between loops, within 0.4 m: covered in about twenty loops.
+        let moved = clutter_run(&config, LAPS, carts);
+        assert!(
+            moved[LAPS - 1] as f64 <= 1.02 * moved[LAPS - 6] as f64,
+            "{kind}: the carts grow the map in the last five loops ({moved:?})"
+        );
+        assert!(
+            moved[LAPS - 1] as f64 > 1.3 * moved[0] as f64,
+            "{kind}: the carts' new places must enter the map to mean anything ({moved:?})"
+        );
+    }
 }
 
 /// Map points after each of ten loops of the room, with `config`.
