@@ -54,8 +54,9 @@ pub struct Relevance {
     /// number of visits (keyframe selection by overlap). 0 inserts every relevant scan, as
     /// Alg. 1 reads. Default (`None`): the matcher's own [`ScanMatcher::min_novelty`], 0.05
     /// for IDC (whose range rule slows with the map's density; on Intel it also scores
-    /// better with it, and its sweep holds) and for WSM (its Intel sweep holds with it, and
-    /// its map over 12 passes of Intel grows by 10 % instead of 170 %), 0 for PL-ICP.
+    /// better with it, and its sweep holds), for WSM (its Intel sweep holds with it, and its
+    /// map over 12 passes of Intel grows by 10 % instead of 170 %) and for PL-ICP (its map
+    /// over those passes holds 35k points instead of 139k).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_novelty: Option<f64>,
     /// How far (m) a scan point must lie from the map to count as new. Default 0.05, five

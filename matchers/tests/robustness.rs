@@ -449,8 +449,13 @@ fn room_with_bush(k: usize) -> SyntheticWorld {
     let mut world = SyntheticWorld::room();
     let mut rng = SplitMix::new(k as u64 + 1);
     for _ in 0..60 {
-        let (r, a) = (0.4 * rng.unit().sqrt(), rng.range(0.0, std::f64::consts::TAU));
-        world.posts.push((-3.3 + r * a.cos(), -2.4 + r * a.sin(), 0.01));
+        let (r, a) = (
+            0.4 * rng.unit().sqrt(),
+            rng.range(0.0, std::f64::consts::TAU),
+        );
+        world
+            .posts
+            .push((-3.3 + r * a.cos(), -2.4 + r * a.sin(), 0.01));
     }
     world
 }

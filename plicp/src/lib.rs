@@ -295,6 +295,16 @@ impl<C: CorrespondenceMetric> ScanMatcher for PlIcp<C> {
         "plicp"
     }
 
+    /// 0.05, as IDC's and WSM's: a relevant scan enters the map only where at least 5 % of
+    /// its points lie farther than `novelty_distance` (5 cm) from it. Without the gate every
+    /// pass over ground already mapped thickens the map: over 12 passes of the Intel log
+    /// q-plicp's map grew from 53k to 139k points (46 MB at the peak) and 905 records of
+    /// pass 12 lay more than 0.5 m from pass 1's poses; with it the map holds 35k points
+    /// (25 MB) and none does.
+    fn min_novelty(&self) -> f64 {
+        0.05
+    }
+
     fn match_with_prior<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,

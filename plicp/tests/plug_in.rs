@@ -131,3 +131,56 @@ fn boosted_plicp_is_the_same_over_every_index() {
     assert_eq!(q, drive("kd-plicp"));
     assert_eq!(q, drive("bf-plicp"));
 }
+
+/// Map points after each of ten loops of the room (radius 2 m, 40 scans a loop, odometry
+/// exact), with the config parsed from `toml`.
+fn ten_loops(toml: &str) -> Vec<usize> {
+    let world = SyntheticWorld::room();
+    let mut pipeline = registry()
+        .parse(toml)
+        .expect("a valid config")
+        .build()
+        .expect("builds");
+    let mut sizes = Vec::new();
+    for k in 0..400 {
+        let a = std::f64::consts::TAU * (k % 40) as f64 / 40.0;
+        let truth = Pose2::new(
+            0.5 + 2.0 * a.cos(),
+            -0.5 + 2.0 * a.sin(),
+            a + std::f64::consts::FRAC_PI_2,
+        );
+        let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
+        scan.timestamp = k as f64;
+        let e = pipeline.process(&Record {
+            scan,
+            odometry: truth,
+            truth: Some(truth),
+            laser_offset: Pose2::IDENTITY,
+        });
+        assert!(e.pose.distance(&truth) < 0.05, "step {k}: {e:?}");
+        if k % 40 == 39 {
+            sizes.push(pipeline.reference_points().len());
+        }
+    }
+    sizes
+}
+
+#[test]
+fn q_plicp_gates_its_map_by_novelty_by_default_and_stops_growing_over_ten_loops() {
+    let mut effective = registry().config("q-plicp").expect("registered");
+    effective.fill_defaults();
+    assert_eq!(effective.relevance.min_novelty, Some(0.05));
+    let gated = ten_loops("[matcher]\nkind = \"q-plicp\"\n");
+    let every = ten_loops("[matcher]\nkind = \"q-plicp\"\n[matcher.relevance]\nmin_novelty = 0\n");
+    println!("q-plicp map after each loop: gated {gated:?}, every relevant scan {every:?}");
+    // The loops after the first add nothing the map lacks; without the gate each adds the
+    // points its noise puts off the surfaces held.
+    assert!(
+        gated[9] as f64 <= 1.02 * gated[0] as f64,
+        "gated: {gated:?}"
+    );
+    assert!(
+        every[9] as f64 > 1.3 * every[0] as f64,
+        "every relevant scan: {every:?}"
+    );
+}
