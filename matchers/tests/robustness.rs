@@ -443,8 +443,8 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     assert!(sizes[2] as f64 > 2.5 * sizes[0] as f64, "{sizes:?}");
 }
 
-/// The room with a bush at scan `k`: its leaves (posts of 1 cm) lie each scan somewhere
-/// else within 0.4 m of the bush's centre, as a laser's returns from foliage do.
+/// The room with a bush at scan `k`: its 60 leaves (posts of 1 cm radius) lie each scan
+/// somewhere else within 0.4 m of the bush's centre, as a laser's returns from foliage do.
 fn room_with_bush(k: usize) -> SyntheticWorld {
     let mut world = SyntheticWorld::room();
     let mut rng = SplitMix::new(k as u64 + 1);
