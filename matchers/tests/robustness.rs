@@ -473,29 +473,6 @@ fn room_with_carts_moved(lap: usize) -> SyntheticWorld {
     world
 }
 
-/// Map points after each of `laps` loops of the room, the room on scan `k` of loop `lap`
-/// being `world(lap, k)`.
-fn clutter_run(
-    config: &MatcherConfig,
-    laps: usize,
-    world: impl Fn(usize, usize) -> SyntheticWorld,
-) -> Vec<usize> {
-    let mut pipeline = config.build().expect("builds");
-    let mut sizes = Vec::new();
-    for lap in 0..laps {
-        for k in 40 * lap..40 * (lap + 1) {
-            let e = pipeline.process(&loop_record(&world(lap, k), k));
-            assert!(
-                e.pose.distance(&on_loop(k)) < 0.05,
-                "{} step {k}: {e:?}",
-                config.kind()
-            );
-        }
-        sizes.push(pipeline.live_points().len());
-    }
-    sizes
-}
-
 #[test]
 fn clutter_that_moves_stops_growing_the_default_maps_once_its_ground_is_covered() {
     // Clutter puts points off every surface the map holds, so the surface band lets them
@@ -508,20 +485,20 @@ fn clutter_that_moves_stops_growing_the_default_maps_once_its_ground_is_covered(
     for kind in [MatcherKind::QWsm, MatcherKind::QIdc] {
         let config = MatcherConfig::defaults(kind);
         // Foliage changes on every scan: covered within a few loops.
-        let foliage = clutter_run(&config, LAPS, bush);
+        let foliage = loop_sizes_in(&config, LAPS, bush);
         assert!(
             foliage[LAPS - 1] as f64 <= 1.02 * foliage[9] as f64,
             "{kind}: the map grows after ten loops by the bush ({foliage:?})"
         );
         let mut ungated = config.clone();
         ungated.relevance.min_novelty = Some(0.0);
-        let ungated = clutter_run(&ungated, LAPS, bush);
+        let ungated = loop_sizes_in(&ungated, LAPS, bush);
         assert!(
             ungated[LAPS - 1] as f64 > 1.1 * ungated[9] as f64,
             "{kind}: without the gate the bush must keep growing the map ({ungated:?})"
         );
         // Carts moved between loops, within 0.4 m: covered in about twenty loops.
-        let moved = clutter_run(&config, LAPS, carts);
+        let moved = loop_sizes_in(&config, LAPS, carts);
         assert!(
             moved[LAPS - 1] as f64 <= 1.02 * moved[LAPS - 6] as f64,
             "{kind}: the carts grow the map in the last five loops ({moved:?})"
@@ -533,17 +510,32 @@ fn clutter_that_moves_stops_growing_the_default_maps_once_its_ground_is_covered(
     }
 }
 
-/// Map points after each of ten loops of the room, with `config`.
+/// Map points after each of `loops` loops of the room, with `config`.
 fn loop_sizes(config: MatcherConfig, loops: usize) -> Vec<usize> {
-    loop_sizes_of(config.build().expect("builds").as_mut(), loops)
+    loop_sizes_in(&config, loops, |_, _| SyntheticWorld::room())
 }
 
-/// Map points after each of `loops` loops of the room, driven through `pipeline`.
-fn loop_sizes_of(pipeline: &mut dyn Odometry, loops: usize) -> Vec<usize> {
-    let world = SyntheticWorld::room();
+/// Map points after each of `loops` loops, with `config`, the world at scan `k` of loop `lap`
+/// being `world(lap, k)`.
+fn loop_sizes_in(
+    config: &MatcherConfig,
+    loops: usize,
+    world: impl Fn(usize, usize) -> SyntheticWorld,
+) -> Vec<usize> {
+    let mut pipeline = config.build().expect("builds");
+    drive_loops(pipeline.as_mut(), loops, world)
+}
+
+/// Map points after each of `loops` loops driven through `pipeline`, the world at scan `k`
+/// of loop `lap` being `world(lap, k)`.
+fn drive_loops(
+    pipeline: &mut dyn Odometry,
+    loops: usize,
+    world: impl Fn(usize, usize) -> SyntheticWorld,
+) -> Vec<usize> {
     let mut sizes = Vec::new();
     for k in 0..40 * loops {
-        let e = pipeline.process(&loop_record(&world, k));
+        let e = pipeline.process(&loop_record(&world(k / 40, k), k));
         assert!(e.pose.distance(&on_loop(k)) < 0.05, "step {k}: {e:?}");
         if k % 40 == 39 {
             sizes.push(pipeline.reference_points().len());
@@ -664,7 +656,7 @@ fn the_map_matchers_gate_their_maps_by_novelty_by_default_and_stop_growing_over_
     }
     // A typed pipeline takes the matcher's own default, as the registry's does.
     let mut typed = typed_q_idc();
-    let sizes = loop_sizes_of(&mut typed, 10);
+    let sizes = drive_loops(&mut typed, 10, |_, _| SyntheticWorld::room());
     assert!(
         sizes[9] as f64 <= 1.05 * sizes[0] as f64,
         "typed: {sizes:?}"
