@@ -30,6 +30,11 @@ pub struct SimArgs {
     /// Override `[drive] seed` (laser and encoder noise).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Override `[world] seed`: a park's layout (where its trees, rocks and benches stand),
+    /// as `qicp run --worlds` numbers its worlds. The corridor's layout follows from its
+    /// dimensions alone.
+    #[arg(long)]
+    pub world_seed: Option<u64>,
     /// Override `[drive] max_scans`: stop after this many scans.
     #[arg(long)]
     pub max_scans: Option<usize>,
@@ -43,6 +48,9 @@ pub fn run(a: SimArgs) -> Result<()> {
     let mut cfg = load_drive(&a.config)?;
     if let Some(seed) = a.seed {
         cfg.drive.seed = seed;
+    }
+    if let Some(seed) = a.world_seed {
+        cfg.world.seed = seed;
     }
     if a.max_scans.is_some() {
         cfg.drive.max_scans = a.max_scans;
