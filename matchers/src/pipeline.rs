@@ -709,8 +709,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         // The re-anchored match passes the check every match passes, as a search's recovery
         // must: one that holds far fewer pairs than recent matches, or leaves a larger
         // residual, fits the old map on a part of the scan only, where a stretch of it looks
-        // alike (aliasing).
-        if is_poor(self.fit(local, &again), self.validator.threshold()) {
+        // alike (aliasing). And it must be pinned to within the tolerance the look-ups'
+        // corrections are compared with: a few trunks fit the old map in many places.
+        if is_poor(self.fit(local, &again), self.validator.threshold())
+            || !Revisit::well_determined(&again)
+        {
             return false;
         }
         if !self.revisit.corroborated(&result.pose, &again.pose) {

@@ -4,6 +4,7 @@
 
 use qicp_core::testdata::SyntheticWorld;
 use qicp_core::{MutualNearest, Pose2, QuadTree, Reference, ScanMatcher, SpatialIndex};
+use qicp_matchers::revisit::AGREE_XY;
 use qicp_matchers::{IcpParams, Registry, Revisit, RevisitParams, Wsm, WsmParams};
 
 /// Where the robot sees the room from at scan `k`.
@@ -87,6 +88,9 @@ fn a_match_on_a_drifted_copy_of_the_room_is_reanchored_to_the_old_map() {
         again.pose
     );
     assert!(revisit.confirms(&reference, scan.points(), &again.pose, &proposal));
+    // A room's walls pin it: its σ lies well within the look-ups' tolerance.
+    assert!(again.position_sigma() < 0.2 * AGREE_XY, "{again:?}");
+    assert!(Revisit::well_determined(&again));
     // The drifted pose itself is not confirmed in the old map.
     assert!(!revisit.confirms(&reference, scan.points(), &drifted, &proposal));
 }
