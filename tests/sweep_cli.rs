@@ -41,6 +41,20 @@ fn sweep_kind_json(kind: &str, extra: &[&str]) -> (serde_json::Value, String) {
     (json, stderr)
 }
 
+/// A drive of `configs/worlds/<world>` simulated into `sim/` of a scratch directory of its
+/// own, `extra` given to `qicp sim`.
+fn simulated(world: &str, extra: &[&str]) -> tempfile::TempDir {
+    let dir = tempfile::Builder::new()
+        .prefix("qicp-sweep-sim-")
+        .tempdir()
+        .expect("scratch dir");
+    let config = format!("{}/configs/worlds/{world}", env!("CARGO_MANIFEST_DIR"));
+    let out = dir.path().join("sim").display().to_string();
+    let o = qicp(&[&["sim", &config, "--out", &out], extra].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    dir
+}
+
 fn f(v: &serde_json::Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
@@ -309,17 +323,11 @@ fn sweep_bounds_hold_on_the_first_3000_intel_scans() {
 /// the odometry's noise and bias, range noise) holds its bound for q-wsm and q-idc. The two
 /// that take points away are reported, not bounded: with every second beam a trunk keeps
 /// one point or none, and within 10 m a park scan often holds too few to match, so they cost
-/// 2-3 times the default here as they do scan to scan (wsm and idc alike).
+/// two to three times the default here, as they do scan to scan (wsm and idc alike).
 #[test]
 fn sweep_bounds_hold_against_the_ground_truth_of_a_simulated_park() {
-    let dir = tempfile::Builder::new()
-        .prefix("qicp-sweep-park-")
-        .tempdir()
-        .expect("scratch dir");
+    let dir = simulated("park.toml", &[]);
     let path = |name: &str| dir.path().join(name).display().to_string();
-    let world = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/worlds/park.toml");
-    let o = qicp(&["sim", world, "--out", &path("sim")]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // As configs/park.toml: a park scan holds a few trunks of two to five points each.
     let config = path("park-matcher.toml");
     std::fs::write(&config, "[matcher.icp]\nmin_correspondences = 5\n").expect("config");
@@ -467,14 +475,8 @@ fn sweep_without_relations_refuses_a_drive_too_short_to_compare() {
 
 #[test]
 fn sweep_against_a_reference_trajectory_scores_the_default_too() {
-    let dir = tempfile::Builder::new()
-        .prefix("qicp-sweep-reference-")
-        .tempdir()
-        .expect("scratch dir");
+    let dir = simulated("corridor.toml", &["--max-scans", "120"]);
     let path = |name: &str| dir.path().join(name).display().to_string();
-    let world = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/worlds/corridor.toml");
-    let o = qicp(&["sim", world, "--out", &path("sim"), "--max-scans", "120"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let log = path("sim/sim.log");
     // idc's own trajectory as the reference: the default run agrees with it exactly.
     let o = qicp(&["match", &log, "--matcher", "idc", "--out", &path("idc")]);
