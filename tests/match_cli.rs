@@ -272,7 +272,7 @@ fn a_no_return_code_is_named_and_the_laser_options_drop_it() {
 
 /// In the paper's sparse park (`configs/worlds/park-sparse.toml`, world 10 of `qicp run
 /// --worlds`: layout seed 10, noise seed 4) a look-up at scan 752 finds the old map explaining
-/// a scan of seven points, on two or three trunks, far better 1 m away. Re-anchored on that one
+/// a scan of seven points, on two or three trunks, far better elsewhere in its window. Re-anchored on that one
 /// look-up (`revisit.confirmations = 1`, the sweep's `confirmations*0.7`), q-wsm's match held
 /// a position σ of 0.2 m, the pose turned and the drive ended 10.4 m ATE off (0.81 m without
 /// the re-anchoring). A re-anchoring whose σ exceeds the tolerance its correction is compared

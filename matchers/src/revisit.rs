@@ -392,7 +392,7 @@ impl Revisit {
     /// far off) fits the old map in more than one place, and its covariance says so; a
     /// correction that uncertain can neither be confirmed nor told from another, so it is
     /// not taken, and the look-up neither confirms nor breaks a run of look-ups. On the
-    /// Freiburg logs every re-anchoring the defaults take has a σ of 2-8 mm, on 96 pairs or
+    /// real logs every re-anchoring the defaults take has a σ of 1.7-8 mm, on 96 pairs or
     /// more. In the paper's sparse park with `confirmations = 1`, those at σ 0.15-0.6 m (6-8
     /// pairs) turned the drive (q-wsm 0.81 → 10.4 m ATE) and those at 36-75 mm helped.
     /// A plug-in matcher whose covariance is all zeros (none known) passes.
