@@ -80,8 +80,20 @@ fn each_first_gate_is_swept_only_on_the_reference_it_acts_on() {
     );
 }
 
+/// Record `k` of a drive through the room: its scan seen from `truth` (1 s apart), with
+/// `odometry` as the wheels read it.
+fn room_record(truth: Pose2, k: usize, odometry: Pose2) -> Record {
+    let mut scan = SyntheticWorld::room().scan(&truth, 0.005, k as u64 + 1);
+    scan.timestamp = k as f64;
+    Record {
+        scan,
+        odometry,
+        truth: Some(truth),
+        laser_offset: Pose2::IDENTITY,
+    }
+}
+
 fn drive(kind: &str) -> Vec<Pose2> {
-    let world = SyntheticWorld::room();
     let mut pipeline = registry()
         .config(kind)
         .expect("a registered kind")
@@ -94,16 +106,9 @@ fn drive(kind: &str) -> Vec<Pose2> {
             -0.8 + 0.03 * k as f64,
             0.025 * k as f64,
         );
-        let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
-        scan.timestamp = k as f64;
-        let record = Record {
-            scan,
-            // Odometry drifting by 1 cm and 0.3° a scan.
-            odometry: truth * Pose2::new(0.01 * k as f64, 0.0, (0.3 * k as f64).to_radians()),
-            truth: Some(truth),
-            laser_offset: Pose2::IDENTITY,
-        };
-        let e = pipeline.process(&record);
+        // Odometry drifting by 1 cm and 0.3° a scan.
+        let odometry = truth * Pose2::new(0.01 * k as f64, 0.0, (0.3 * k as f64).to_radians());
+        let e = pipeline.process(&room_record(truth, k, odometry));
         assert!(
             e.pose.distance(&truth) < 0.03,
             "{kind}, scan {k}: {:.3} m off",
@@ -135,7 +140,6 @@ fn boosted_plicp_is_the_same_over_every_index() {
 /// Map points after each of ten loops of the room (radius 2 m, 40 scans a loop, odometry
 /// exact), with the config parsed from `toml`.
 fn ten_loops(toml: &str) -> Vec<usize> {
-    let world = SyntheticWorld::room();
     let mut pipeline = registry()
         .parse(toml)
         .expect("a valid config")
@@ -149,14 +153,7 @@ fn ten_loops(toml: &str) -> Vec<usize> {
             -0.5 + 2.0 * a.sin(),
             a + std::f64::consts::FRAC_PI_2,
         );
-        let mut scan = world.scan(&truth, 0.005, k as u64 + 1);
-        scan.timestamp = k as f64;
-        let e = pipeline.process(&Record {
-            scan,
-            odometry: truth,
-            truth: Some(truth),
-            laser_offset: Pose2::IDENTITY,
-        });
+        let e = pipeline.process(&room_record(truth, k, truth));
         assert!(e.pose.distance(&truth) < 0.05, "step {k}: {e:?}");
         if k % 40 == 39 {
             sizes.push(pipeline.reference_points().len());
