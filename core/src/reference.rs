@@ -272,8 +272,6 @@ pub struct Reference<I> {
     scans: usize,
     /// True once a scan was merged into it ([`Reference::is_map`]).
     merged: bool,
-    /// The live points of each cell of the cell cap ([`Merge::max_cell_points`]), by id.
-    cells: HashMap<(i64, i64), Vec<PointId>>,
     /// Per point: the number of the scan that inserted it or last landed on its surface
     /// ([`FullCell::EvictStalest`]).
     confirmed: Vec<u32>,
@@ -316,7 +314,6 @@ impl<I: SpatialIndex> Reference<I> {
             info: Vec::new(),
             scans: 0,
             merged: false,
-            cells: HashMap::new(),
             confirmed: Vec::new(),
             born: Vec::new(),
             cell_size: 0.0,
@@ -450,7 +447,6 @@ impl<I: SpatialIndex> Reference<I> {
         self.info.clear();
         self.scans = 0;
         self.merged = false;
-        self.cells.clear();
         self.confirmed.clear();
         self.born.clear();
         self.live.clear();
@@ -513,7 +509,6 @@ impl<I: SpatialIndex> Reference<I> {
                 covariance: rot * seen.covariance * rot.transpose(),
                 linearity: seen.linearity,
             };
-            let mut cell = None;
             if let Some(merge) = merge {
                 let resolution = merge.resolution;
                 let reach = info.spacing.max(resolution);
@@ -546,17 +541,13 @@ impl<I: SpatialIndex> Reference<I> {
                     self.confirmed[n.id as usize] = stamp;
                     continue;
                 }
-                cell = merge.cell(p);
-                if let Some(c) = cell
+                if let Some(c) = merge.cell(p)
                     && !self.make_room(c, merge, stamp)
                 {
                     continue;
                 }
             }
-            let id = self.index.insert(*p)?;
-            if let Some(c) = cell {
-                self.cells.entry(c).or_default().push(id);
-            }
+            self.index.insert(*p)?;
             self.info.push(info);
             self.confirmed.push(stamp);
             self.born.push(stamp);
@@ -635,11 +626,6 @@ impl<I: SpatialIndex> Reference<I> {
                 if looks.1 >= CARVE_MISSES && looks.1 > looks.0 {
                     self.live[id] = false;
                     self.stale += 1;
-                    if let Some(cell) = merge.cell(&n.point)
-                        && let Some(ids) = self.cells.get_mut(&cell)
-                    {
-                        ids.retain(|&other| other != n.id);
-                    }
                     rebuild |= self.index.remove(n.id).is_none();
                 }
             } else if (rho - a).abs() <= margin || (rho - b).abs() <= margin {
@@ -651,32 +637,49 @@ impl<I: SpatialIndex> Reference<I> {
     }
 
     /// Whether cell `c` can take one more point under `merge`'s cap, replacing its stalest
-    /// point if [`FullCell::EvictStalest`] says so.
+    /// point if [`FullCell::EvictStalest`] says so: the one scans have confirmed least
+    /// recently, and of those the oldest (the lowest id).
     fn make_room(&mut self, c: (i64, i64), merge: Merge, stamp: u32) -> bool {
-        let Some(ids) = self.cells.get_mut(&c) else {
-            return true;
-        };
-        if ids.len() < merge.max_cell_points as usize {
+        let members = self.cell_members(c, merge.cell_size);
+        if members.len() < merge.max_cell_points as usize {
             return true;
         }
         if merge.full_cell == FullCell::Skip {
             return false;
         }
-        let confirmed = &self.confirmed;
-        let Some((k, &stalest)) = ids
+        let Some(stalest) = members
             .iter()
-            .enumerate()
-            .min_by_key(|(_, id)| confirmed[**id as usize])
+            .copied()
+            .min_by_key(|&id| (self.confirmed[id as usize], id))
         else {
             return true;
         };
-        if confirmed[stalest as usize] >= stamp {
+        if self.confirmed[stalest as usize] >= stamp {
             return false;
         }
-        ids.swap_remove(k);
         self.live[stalest as usize] = false;
         self.stale += 1;
         true
+    }
+
+    /// The live points of cell `c` (side `side`), by id: the index's points within the
+    /// cell's circumcircle that fall in it. The cap keeps no table of its own, so it costs
+    /// no memory per point; it asks the index once per point about to enter a map.
+    fn cell_members(&mut self, c: (i64, i64), side: f64) -> Vec<PointId> {
+        let centre = Point2::new((c.0 as f64 + 0.5) * side, (c.1 as f64 + 0.5) * side);
+        // The half diagonal, widened so that rounding never drops a corner point; the cell
+        // test below decides.
+        let reach = side * (0.5 * std::f64::consts::SQRT_2 + 1e-9);
+        let mut around = std::mem::take(&mut self.around);
+        self.index.within_radius(&centre, reach, &mut around);
+        let points = self.index.points();
+        let members = around
+            .iter()
+            .map(|n| n.id)
+            .filter(|&id| self.live[id as usize] && cell_of(&points[id as usize], side) == c)
+            .collect();
+        self.around = around;
+        members
     }
 
     /// Moves every point by the pose `moved` gives for the number of the scan that inserted
@@ -710,20 +713,19 @@ impl<I: SpatialIndex> Reference<I> {
             self.clear();
             return Err(e);
         }
-        if !self.cells.is_empty() {
-            self.cells.clear();
-            for (id, p) in self.index.points().iter().enumerate() {
-                // After the rebuild every point is live.
-                let id = id as PointId;
-                self.cells
-                    .entry(cell_of(p, self.cell_size))
-                    .or_default()
-                    .push(id);
+        if self.cell_cap > 0 && self.cell_size > 0.0 {
+            // After the rebuild every point is live. Counts first, so that only the cells
+            // over their cap are gathered.
+            let size = self.cell_size;
+            let mut counts: HashMap<(i64, i64), usize> = HashMap::new();
+            for p in self.index.points() {
+                *counts.entry(cell_of(p, size)).or_default() += 1;
             }
             let cap = self.cell_cap as usize;
-            for ids in self.cells.values_mut().filter(|ids| ids.len() > cap) {
-                // The most recently confirmed stay.
-                ids.sort_by_key(|&id| std::cmp::Reverse(self.confirmed[id as usize]));
+            for (c, _) in counts.into_iter().filter(|&(_, n)| n > cap) {
+                let mut ids = self.cell_members(c, size);
+                // The most recently confirmed stay; of equally stale ones, the oldest.
+                ids.sort_by_key(|&id| (std::cmp::Reverse(self.confirmed[id as usize]), id));
                 for id in ids.drain(cap..) {
                     self.live[id as usize] = false;
                     self.stale += 1;
@@ -766,11 +768,6 @@ impl<I: SpatialIndex> Reference<I> {
         self.live.clear();
         self.live.resize(k, true);
         self.stale = 0;
-        for ids in self.cells.values_mut() {
-            for id in ids.iter_mut() {
-                *id = id_of[*id as usize];
-            }
-        }
         Ok(())
     }
 }

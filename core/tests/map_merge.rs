@@ -149,6 +149,40 @@ fn a_full_cell_replaces_the_point_confirmed_least_recently() {
 }
 
 #[test]
+fn a_full_cell_replaces_the_oldest_of_its_equally_stale_points() {
+    // One cell of 10 m holds the whole wall; a cap of 3. The first look's first three
+    // samples enter and fill it (a look never replaces its own points). A later point then
+    // replaces one of the three, all confirmed last by that look: the oldest, the first.
+    fn looks<I: SpatialIndex>(index: I, full_cell: FullCell) -> Vec<Vec<Point2<f64>>> {
+        let merge = Merge {
+            max_cell_points: 3,
+            cell_size: 10.0,
+            full_cell,
+            ..Merge::spacing(0.0)
+        };
+        let one_point = Scan::new(0.0, BeamGeometry::centered(1, 0.0, 30.0), vec![1.08]);
+        let mut map = Reference::new(index);
+        let (wall, pose) = wall_scan(1.0, 0.05);
+        assert_eq!(map.insert_scan(&wall, &pose, Some(merge)), Ok(3));
+        let first = map.live_points();
+        let later = map.insert_scan(&one_point.expect("finite"), &pose, Some(merge));
+        assert_eq!(later, Ok(usize::from(full_cell == FullCell::EvictStalest)));
+        vec![first, map.live_points()]
+    }
+    let quad = looks(QuadTree::default(), FullCell::EvictStalest);
+    let [first, after] = [&quad[0], &quad[1]];
+    assert_eq!(after[..2], first[1..], "the first sample is replaced");
+    assert!(
+        (after[2] - Point2::new(1.0, 1.08)).norm() < 1e-9,
+        "{after:?}"
+    );
+    assert_eq!(looks(BruteForce::default(), FullCell::EvictStalest), quad);
+    // A full cell that skips takes nothing.
+    let skipping = looks(QuadTree::default(), FullCell::Skip);
+    assert_eq!(skipping[1], skipping[0]);
+}
+
+#[test]
 fn an_evicting_cap_keeps_the_same_points_in_every_index() {
     // Enough revisits that full cells replace points and the index is rebuilt without them.
     let capped = Merge {

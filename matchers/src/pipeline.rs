@@ -66,14 +66,20 @@ pub struct Relevance {
     /// Side of the square cells of the map's cell cap (m). Default 0.1.
     pub cell_size: f64,
     /// A boosted map holds at most this many points in a cell of `cell_size` (0: no cap, as
-    /// Alg. 1 reads), so its density stops growing with the visits. A straight wall sampled
-    /// at WSM's 1 cm spacing puts about ten points into each cell it crosses (IDC's 2 cm,
-    /// five). Default 0 (off): at 20 the Intel sweeps of q-wsm scored no better over both
-    /// record orders, and its default run broke in one of them (see the README). The points
-    /// full cells replace leave the index in rebuilds, each of which restarts the map's age
-    /// for re-anchoring's look-ups (`[matcher.revisit] age_scans`): with a cap, a revisit
-    /// that fills cells is looked up less often.
-    pub max_cell_points: u32,
+    /// Alg. 1 reads), so its memory grows with the area explored, whatever the time spent
+    /// there. What a full cell does with a new point is `full_cell`.
+    /// Default (`None`): the count two surfaces crossing a cell diagonally put into it at the
+    /// map's spacing, ⌈2√2 · `cell_size` / `map_resolution`⌉ ([`two_surfaces_cap`]): 29 for
+    /// WSM's 1 cm, 15 for IDC's and PL-ICP's 2 cm; none where the map keeps every point
+    /// (`map_resolution = 0`). The spacing, the surface band and the novelty gate keep most
+    /// cells below it (on Intel it changes the boosted maps by about 1 %), so it binds where
+    /// they do not: a corner, clutter seen from many places, a map laid over itself. It is a
+    /// bound on memory per area, not a mechanism of accuracy (see the README's robustness
+    /// section for its sweeps). The points full cells replace leave the index in rebuilds, each of
+    /// which restarts the map's age for re-anchoring's look-ups (`[matcher.revisit]
+    /// age_scans`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_cell_points: Option<u32>,
     /// What a full cell does with a new point: `"evict_stalest"` (default) replaces the
     /// cell's point that scans have confirmed least recently; `"skip"` keeps its first points
     /// (a full cell then keeps the first copy of its wall, right or wrong: with it, at 20, the
@@ -104,6 +110,21 @@ const MAX_CELL_SIZE: f64 = 1e3;
 /// enough that the window's arithmetic cannot overflow.
 const MAX_WINDOW_SCANS: usize = 1_000_000;
 
+/// The default cell cap ([`Relevance::max_cell_points`]): the points two surfaces sampled at
+/// `resolution` (m) put into a square cell of side `cell_size` when both cross it along its
+/// diagonal, ⌈2√2 · `cell_size` / `resolution`⌉. 0 (no cap) where the map keeps every point
+/// (`resolution` 0, as Alg. 1 reads).
+#[must_use]
+pub fn two_surfaces_cap(cell_size: f64, resolution: f64) -> u32 {
+    if !(resolution > 0.0 && resolution.is_finite() && cell_size.is_finite()) {
+        return 0;
+    }
+    // Saturating: a cap beyond u32 caps nothing anyway.
+    (2.0 * std::f64::consts::SQRT_2 * cell_size / resolution)
+        .ceil()
+        .clamp(1.0, f64::from(u32::MAX)) as u32
+}
+
 impl Default for Relevance {
     fn default() -> Self {
         Self {
@@ -114,7 +135,7 @@ impl Default for Relevance {
             min_novelty: None,
             novelty_distance: 0.05,
             cell_size: 0.1,
-            max_cell_points: 0,
+            max_cell_points: None,
             full_cell: FullCell::EvictStalest,
             window_scans: 0,
             free_space_margin: 0.0,
@@ -179,10 +200,13 @@ impl Relevance {
         matcher_band_sigmas: f64,
         range_sigma: f64,
     ) -> Merge {
+        let resolution = self.map_resolution.unwrap_or(matcher_resolution);
         Merge {
-            resolution: self.map_resolution.unwrap_or(matcher_resolution),
+            resolution,
             cell_size: self.cell_size,
-            max_cell_points: self.max_cell_points,
+            max_cell_points: self
+                .max_cell_points
+                .unwrap_or_else(|| two_surfaces_cap(self.cell_size, resolution)),
             full_cell: self.full_cell,
             surface_band: self.surface_band_sigmas.unwrap_or(matcher_band_sigmas) * range_sigma,
             free_space_margin: self.free_space_margin,

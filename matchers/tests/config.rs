@@ -258,6 +258,49 @@ fn steering_parameters_scale_one_at_a_time() {
     assert!(err.to_string().contains("matcher.icp.nope"));
 }
 
+/// The cell cap is on by default at two surfaces' samples per cell, at the map's own spacing,
+/// is swept like every density bound, and is off where the map keeps every point (Alg. 1).
+#[test]
+fn the_default_cell_cap_is_two_surfaces_at_the_maps_spacing() {
+    let cap = |c: &MatcherConfig| c.parameter("matcher.relevance.max_cell_points");
+    for (kind, points) in [
+        (MatcherKind::QWsm, 29.0),
+        (MatcherKind::KdWsm, 29.0),
+        (MatcherKind::QIdc, 15.0),
+    ] {
+        let c = MatcherConfig::defaults(kind);
+        assert_eq!(cap(&c), Some(points), "{kind}");
+        let keys = c.steering_parameters();
+        for key in ["max_cell_points", "cell_size"] {
+            let key = format!("matcher.relevance.{key}");
+            assert!(keys.contains(&key), "{kind}: {key} is not swept");
+        }
+        // At a finer spacing, a finer wall: the cap follows unless it is given.
+        let parse = |relevance: &str| {
+            MatcherConfig::from_toml(&format!(
+                "[matcher]\nkind = \"{kind}\"\n[matcher.relevance]\n{relevance}\n"
+            ))
+            .expect("parses")
+        };
+        assert_eq!(cap(&parse("map_resolution = 0.005")), Some(57.0), "{kind}");
+        let given = parse("map_resolution = 0.005\nmax_cell_points = 12");
+        assert_eq!(cap(&given), Some(12.0), "{kind}");
+        let plain = parse("map_resolution = 0.0");
+        assert_eq!(cap(&plain), Some(0.0), "{kind}");
+        assert!(
+            !plain
+                .steering_parameters()
+                .contains(&"matcher.relevance.cell_size".to_string()),
+            "{kind}: the cell's size serves no cap"
+        );
+    }
+    assert_eq!(qicp_matchers::pipeline::two_surfaces_cap(0.1, f64::NAN), 0);
+    assert_eq!(
+        qicp_matchers::pipeline::two_surfaces_cap(1e3, 1e-300),
+        u32::MAX
+    );
+}
+
 /// A check switched off leaves its parameters inert: sweeping them would rerun the default and
 /// pull the median ratio towards 1 (a review of the sweep found `revisit.*` variants run with
 /// re-anchoring off).

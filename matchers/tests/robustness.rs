@@ -4,8 +4,8 @@
 
 use qicp_core::testdata::{SplitMix, SyntheticWorld};
 use qicp_core::{
-    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, MutualNearest, Pose2, QuadTree,
-    Record, Reference, Scan, ScanMatcher, SpatialIndex,
+    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, MutualNearest, Point2, Pose2,
+    QuadTree, Record, Reference, Scan, ScanMatcher, SpatialIndex,
 };
 use qicp_matchers::{
     CorrelativeParams, FieldOfView, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind,
@@ -374,7 +374,7 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
         config.relevance.surface_band_sigmas = Some(0.0);
         config.relevance.min_novelty = Some(0.0);
         assert_eq!(config.relevance.full_cell, FullCell::EvictStalest);
-        config.relevance.max_cell_points = 6;
+        config.relevance.max_cell_points = Some(6);
         let mut pipeline = config.build().expect("builds");
         let mut after_loop = Vec::new();
         for k in 0..400 {
@@ -408,16 +408,9 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
             }
         }
         // And the cell cap: no cell holds more than its share (counted one by one).
-        let size = config.relevance.cell_size;
-        let mut cells = std::collections::HashMap::new();
-        for p in points {
-            *cells
-                .entry(((p.x / size).floor() as i64, (p.y / size).floor() as i64))
-                .or_insert(0u32) += 1;
-        }
-        let fullest = cells.values().copied().max().unwrap_or(0);
+        let fullest = fullest_cell(points, config.relevance.cell_size);
         assert!(
-            fullest <= config.relevance.max_cell_points,
+            Some(fullest) <= config.relevance.max_cell_points,
             "{kind}: a cell holds {fullest} points"
         );
         if kind == MatcherKind::QWsm {
@@ -430,7 +423,7 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     config.relevance.map_resolution = Some(0.0);
     config.relevance.surface_band_sigmas = Some(0.0);
     config.relevance.min_novelty = Some(0.0);
-    config.relevance.max_cell_points = 0;
+    config.relevance.max_cell_points = Some(0);
     let mut pipeline = config.build().expect("builds");
     let mut sizes = Vec::new();
     for k in 0..120 {
@@ -507,6 +500,50 @@ fn clutter_that_moves_stops_growing_the_default_maps_once_its_ground_is_covered(
             moved[LAPS - 1] as f64 > 1.3 * moved[0] as f64,
             "{kind}: the carts' new places must enter the map to mean anything ({moved:?})"
         );
+    }
+}
+
+/// The most points any square cell of side `size` holds, counted one by one.
+fn fullest_cell(points: &[Point2<f64>], size: f64) -> u32 {
+    let mut cells = std::collections::HashMap::new();
+    for p in points {
+        *cells
+            .entry(((p.x / size).floor() as i64, (p.y / size).floor() as i64))
+            .or_insert(0u32) += 1;
+    }
+    cells.values().copied().max().unwrap_or(0)
+}
+
+#[test]
+fn the_default_cell_cap_holds_a_bush_the_novelty_gate_lets_in() {
+    // With the novelty gate off, every relevant scan adds the leaves it sees: they lie off
+    // every surface the map holds, so neither the spacing nor the surface band keeps them
+    // out, and over thirty loops the bush's cells fill past two surfaces' worth of samples. The default cell
+    // cap (two surfaces' samples per 10 cm cell at the map's spacing) holds every cell to
+    // it, replacing the stalest points.
+    const LAPS: usize = 30;
+    let bush = |_lap: usize, k: usize| room_with_bush(k);
+    for (kind, cap) in [(MatcherKind::QWsm, 29), (MatcherKind::QIdc, 15)] {
+        let mut config = MatcherConfig::defaults(kind);
+        config.relevance.min_novelty = Some(0.0);
+        let mut filled = config.clone();
+        filled.fill_defaults();
+        assert_eq!(filled.relevance.max_cell_points, Some(cap), "{kind}");
+        let mut uncapped = config.clone();
+        uncapped.relevance.max_cell_points = Some(0);
+        let [capped, uncapped] = [config, uncapped].map(|c| {
+            let mut pipeline = c.build().expect("builds");
+            drive_loops(pipeline.as_mut(), LAPS, bush);
+            let live = pipeline.live_points();
+            (live.len(), fullest_cell(&live, c.relevance.cell_size))
+        });
+        println!("{kind}: (live points, fullest cell) capped {capped:?}, uncapped {uncapped:?}");
+        assert!(capped.1 <= cap, "{kind}: a cell holds {} points", capped.1);
+        assert!(
+            uncapped.1 > cap,
+            "{kind}: without the cap the bush must fill a cell past it ({uncapped:?})"
+        );
+        assert!(capped.0 <= uncapped.0, "{kind}: {capped:?} {uncapped:?}");
     }
 }
 
