@@ -73,11 +73,11 @@ pub struct Relevance {
     /// WSM's 1 cm, 15 for IDC's and PL-ICP's 2 cm; none where the map keeps every point
     /// (`map_resolution = 0`). The spacing, the surface band and the novelty gate keep most
     /// cells below it (on Intel it changes the boosted maps by about 1 %), so it binds where
-    /// they do not: a corner, clutter seen from many places, a map laid over itself. It is a
-    /// bound on memory per area, not a mechanism of accuracy (see the README's robustness
-    /// section for its sweeps). The points full cells replace leave the index in rebuilds, each of
-    /// which restarts the map's age for re-anchoring's look-ups (`[matcher.revisit]
-    /// age_scans`).
+    /// they do not: clutter the novelty gate lets in, a map laid over itself. It is a bound
+    /// on memory per area, not a mechanism of accuracy (docs/robustness.md, "A cell cap on
+    /// by default", has its sweeps). The points full cells replace leave the index in
+    /// rebuilds, each of which restarts the map's age for re-anchoring's look-ups
+    /// (`[matcher.revisit] age_scans`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_cell_points: Option<u32>,
     /// What a full cell does with a new point: `"evict_stalest"` (default) replaces the

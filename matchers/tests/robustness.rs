@@ -367,8 +367,8 @@ fn the_map_stays_under_its_density_cap_over_ten_loops() {
     // point, without the surface band and the novelty gate, which would keep most of the
     // revisits' points out before the cell cap sees them. The room's walls, 2 m off, are
     // sampled every few centimetres: a look puts two or three points into a 10 cm cell, so
-    // the default cap of 20 would bind only after many more loops; a cap of 6 binds within
-    // three.
+    // the default caps (29 and 15) would bind only after many more loops; a cap of 6 binds
+    // within three.
     for (kind, cap) in [(MatcherKind::QWsm, 0.01), (MatcherKind::QIdc, 0.02)] {
         let mut config = MatcherConfig::defaults(kind);
         config.relevance.surface_band_sigmas = Some(0.0);
