@@ -411,6 +411,11 @@ pub trait Odometry: Send + std::fmt::Debug {
     fn live_points(&self) -> Vec<Point2<f64>> {
         self.reference_points().to_vec()
     }
+    /// How many live points the reference holds: the length of [`Odometry::live_points`],
+    /// without gathering them. The map's size as `qicp match` reports it (`map_points`).
+    fn live_len(&self) -> usize {
+        self.live_points().len()
+    }
     /// A correction of earlier records' poses that the last [`Odometry::process`] made, once
     /// ([`RevisitParams::deform`]): a trajectory kept by the caller should take it. None by
     /// default.
@@ -980,6 +985,10 @@ where
 
     fn live_points(&self) -> Vec<Point2<f64>> {
         self.reference.live_points()
+    }
+
+    fn live_len(&self) -> usize {
+        self.reference.len() - self.reference.stale_len()
     }
 
     fn take_amendment(&mut self) -> Option<Amendment> {

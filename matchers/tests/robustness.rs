@@ -503,6 +503,24 @@ fn clutter_that_moves_stops_growing_the_default_maps_once_its_ground_is_covered(
     }
 }
 
+#[test]
+fn the_maps_size_counts_only_its_live_points() {
+    // A full cell's replaced points stay in the index until a rebuild drops them; the map's
+    // size (`qicp match`'s `map_points`, the Python package's `map_points()`) leaves them out.
+    let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
+    config.relevance.min_novelty = Some(0.0);
+    config.relevance.max_cell_points = Some(3);
+    let mut pipeline = config.build().expect("builds");
+    let mut stale_seen = false;
+    for k in 0..80 {
+        pipeline.process(&loop_record(&SyntheticWorld::room(), k));
+        let live = pipeline.live_points().len();
+        assert_eq!(pipeline.live_len(), live, "step {k}");
+        stale_seen |= pipeline.reference_points().len() > live;
+    }
+    assert!(stale_seen, "no replaced point waited for a rebuild");
+}
+
 /// The most points any square cell of side `size` holds, counted one by one.
 fn fullest_cell(points: &[Point2<f64>], size: f64) -> u32 {
     let mut cells = std::collections::HashMap::new();

@@ -54,7 +54,8 @@ pub struct MatchSummary {
     pub ms_per_scan_p99: f64,
     /// Total time spent matching (s), the sum over scans.
     pub wall_seconds: f64,
-    /// Points in the reference at the end (the whole map for boosted matchers).
+    /// Live points in the reference at the end (the whole map for boosted matchers), without
+    /// those a full cell replaced or carving removed that the index has not dropped yet.
     pub map_points: usize,
     /// Mean residual correlation distance over matched scans (mm).
     pub residual_mean_mm: f64,
@@ -303,11 +304,8 @@ impl MatchLoop {
     /// The totals so far.
     #[must_use]
     pub fn summary(&self) -> MatchSummary {
-        self.totals.summary(
-            &self.kind,
-            self.busy,
-            self.odometry.reference_points().len(),
-        )
+        self.totals
+            .summary(&self.kind, self.busy, self.odometry.live_len())
     }
 
     /// Ends the run: totals and the pipeline (with its map).

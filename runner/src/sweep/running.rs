@@ -15,7 +15,7 @@ pub struct RunFigures {
     pub rot_mean_deg: f64,
     /// Median wall time per scan (ms): the only figure that varies from run to run.
     pub ms_per_scan_median: f64,
-    /// Points in the reference at the end.
+    /// Live points in the reference at the end (as `qicp match` reports them).
     pub map_points: usize,
     /// Records matched.
     pub scans: usize,
