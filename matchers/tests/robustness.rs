@@ -132,14 +132,15 @@ fn a_start_twenty_degrees_off_is_recovered() {
     }
 }
 
-/// A matcher that returns a wrong pose on its `at`-th call (0: never), as a match that
-/// converged into the wrong basin would: `wrong` turns the right pose into the wrong one. It
-/// keeps the prior of each call in `priors`.
+/// A matcher that returns a wrong pose on its calls `at` to `until` (`at` 0: never), as a
+/// match that converged into the wrong basin would: `wrong` turns the right pose into the
+/// wrong one. It keeps the prior of each call in `priors`.
 #[derive(Debug)]
 struct Sabotaged<M> {
     inner: M,
     calls: usize,
     at: usize,
+    until: usize,
     wrong: fn(&Pose2) -> Pose2,
     priors: Priors,
 }
@@ -167,7 +168,7 @@ impl<M: ScanMatcher> ScanMatcher for Sabotaged<M> {
         self.priors.lock().expect("not poisoned").push(prior);
         let mut result = self.inner.match_with_prior(reference, scan, guess, prior);
         self.calls += 1;
-        if self.calls == self.at {
+        if self.at > 0 && (self.at..=self.until.max(self.at)).contains(&self.calls) {
             result.pose = (self.wrong)(&result.pose);
         }
         result
@@ -185,6 +186,16 @@ fn sabotaged_with(
     wrong: fn(&Pose2) -> Pose2,
     validation: ValidationParams,
 ) -> Pipeline<Sabotaged<Plain>, QuadTree> {
+    sabotaged_over(at, at, wrong, validation)
+}
+
+/// The sabotaged WSM wrong on its calls `at` to `until`, every scan relevant.
+fn sabotaged_over(
+    at: usize,
+    until: usize,
+    wrong: fn(&Pose2) -> Pose2,
+    validation: ValidationParams,
+) -> Pipeline<Sabotaged<Plain>, QuadTree> {
     let every_scan = Relevance {
         tau_max: 0.0,
         rho_max_deg: 0.0,
@@ -197,6 +208,7 @@ fn sabotaged_with(
             inner: Plain::new(IcpParams::default(), WsmParams::default()),
             calls: 0,
             at,
+            until,
             wrong,
             priors: Priors::default(),
         },
@@ -241,6 +253,33 @@ fn a_wrong_match_does_not_enter_the_map() {
     for k in 0..12 {
         let e = pipeline.process(&record(k, truth(k)));
         assert!(e.inserted, "scan {k}");
+    }
+}
+
+#[test]
+fn a_match_after_a_run_of_refusals_is_not_followed_where_the_prediction_explains_more() {
+    // Scans 11-14 are matched wrong. The first three are refused, and the third refusal in a
+    // row starts the level afresh; scan 14's match then has no level to be judged by. With
+    // odometry's veto off, only the prediction's share can tell it went astray.
+    let unvetoed = ValidationParams {
+        search: false,
+        max_odometry_chi2: 0.0,
+        ..ValidationParams::default()
+    };
+    let mut pipeline = sabotaged_over(12, 15, turned, unvetoed);
+    for k in 0..20 {
+        let before = pipeline.reference().len();
+        let e = pipeline.process(&record(k, truth(k)));
+        let (dist, deg) = error(&e.pose, k);
+        assert!(dist < 0.03 && deg < 0.5, "scan {k}: {dist:.3} m, {deg:.2}°");
+        if (11..=13).contains(&k) {
+            assert!(e.check.refused, "scan {k}: {e:?}");
+        }
+        if (11..=14).contains(&k) {
+            assert_eq!(e.result.fallback, Some(Fallback::Refused), "scan {k}");
+            assert!(!e.inserted, "scan {k}");
+            assert_eq!(pipeline.reference().len(), before, "scan {k}");
+        }
     }
 }
 
@@ -1017,6 +1056,7 @@ fn brisk_drive(
             inner: Plain::new(IcpParams::default(), WsmParams::default()),
             calls: 0,
             at: 0,
+            until: 0,
             wrong: turned,
             priors: priors.clone(),
         },
