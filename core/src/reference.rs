@@ -640,18 +640,29 @@ impl<I: SpatialIndex> Reference<I> {
     /// point if [`FullCell::EvictStalest`] says so: the one scans have confirmed least
     /// recently, and of those the oldest (the lowest id).
     fn make_room(&mut self, c: (i64, i64), merge: Merge, stamp: u32) -> bool {
-        let members = self.cell_members(c, merge.cell_size);
-        if members.len() < merge.max_cell_points as usize {
+        let side = merge.cell_size;
+        let mut around = std::mem::take(&mut self.around);
+        self.cell_search(c, side, &mut around);
+        // Counted first: a cell with room, the common case, gathers nothing.
+        let points = self.index.points();
+        let members = || {
+            around
+                .iter()
+                .map(|n| n.id)
+                .filter(|&id| self.live[id as usize] && cell_of(&points[id as usize], side) == c)
+        };
+        let full = members().count() >= merge.max_cell_points as usize;
+        let stalest = (full && merge.full_cell != FullCell::Skip)
+            .then(|| members().min_by_key(|&id| (self.confirmed[id as usize], id)))
+            .flatten();
+        self.around = around;
+        if !full {
             return true;
         }
         if merge.full_cell == FullCell::Skip {
             return false;
         }
-        let Some(stalest) = members
-            .iter()
-            .copied()
-            .min_by_key(|&id| (self.confirmed[id as usize], id))
-        else {
+        let Some(stalest) = stalest else {
             return true;
         };
         if self.confirmed[stalest as usize] >= stamp {
@@ -662,16 +673,22 @@ impl<I: SpatialIndex> Reference<I> {
         true
     }
 
-    /// The live points of cell `c` (side `side`), by id: the index's points within the
-    /// cell's circumcircle that fall in it. The cap keeps no table of its own, so it costs
-    /// no memory per point; it asks the index once per point about to enter a map.
-    fn cell_members(&mut self, c: (i64, i64), side: f64) -> Vec<PointId> {
+    /// The index's points within the circumcircle of cell `c` (side `side`), into `around`:
+    /// every point of the cell among them, and some of its neighbours'. The cap keeps no
+    /// table of its own, so it costs no memory per point; it asks the index once per point
+    /// about to enter a map.
+    fn cell_search(&self, c: (i64, i64), side: f64, around: &mut Vec<Neighbour>) {
         let centre = Point2::new((c.0 as f64 + 0.5) * side, (c.1 as f64 + 0.5) * side);
         // The half diagonal, widened so that rounding never drops a corner point; the cell
-        // test below decides.
+        // test decides.
         let reach = side * (0.5 * std::f64::consts::SQRT_2 + 1e-9);
+        self.index.within_radius(&centre, reach, around);
+    }
+
+    /// The live points of cell `c` (side `side`), by id.
+    fn cell_members(&mut self, c: (i64, i64), side: f64) -> Vec<PointId> {
         let mut around = std::mem::take(&mut self.around);
-        self.index.within_radius(&centre, reach, &mut around);
+        self.cell_search(c, side, &mut around);
         let points = self.index.points();
         let members = around
             .iter()
