@@ -687,17 +687,17 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             }
         }
         let passed = result.fallback.is_none() && level.is_some() && !is_poor(fit, level);
+        let restarting = level.is_none() && self.validator.restarting();
         if result.fallback.is_none() {
             self.validator.record(fit);
             check.inlier_share = fit.share;
             check.refused = self.validator.refuse(fit, level);
             // A refused match is weighed against the prediction: where the prediction
             // explains the scan at least as well, the match went astray, and the next
-            // prediction must not start from it. A match with no level to judge it (a run's
-            // first scans, or the level starting afresh after a run of refusals, which a
-            // scene change or a lost pose may cause) is judged by the prediction's share in
-            // the running median's place: it went astray where it falls more than
-            // `max_share_drop` below it.
+            // prediction must not start from it. After a run of refusals has cleared the
+            // level (a scene change, or a lost pose), a match has no level to judge it until
+            // new matches set one; the prediction's share stands in for the running median,
+            // and the match went astray where it falls more than `max_share_drop` below it.
             let astray = |predicted: f64| {
                 if check.refused {
                     predicted >= fit.share
@@ -705,7 +705,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     (1.0 - self.validator.params.max_share_drop) * predicted > fit.share
                 }
             };
-            if (check.refused || level.is_none()) && astray(self.share(local, &guess)) {
+            if (check.refused || restarting) && astray(self.share(local, &guess)) {
                 result = MatchResult::fallback(guess, Fallback::Refused);
             }
         }

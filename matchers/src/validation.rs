@@ -236,6 +236,8 @@ pub struct Validator {
     recent: VecDeque<Fit>,
     sorted: Vec<f64>,
     refusals: usize,
+    /// The history was cleared by a run of refusals, not by a new drive.
+    restarted: bool,
 }
 
 /// The field of view of the last scan that entered a reference: its laser pose in the
@@ -320,6 +322,7 @@ impl Validator {
             recent: VecDeque::with_capacity(params.history),
             sorted: Vec::with_capacity(params.history),
             refusals: 0,
+            restarted: false,
         }
     }
 
@@ -457,6 +460,7 @@ impl Validator {
         self.refusals = if refused { self.refusals + 1 } else { 0 };
         if self.refusals >= self.params.max_refusals {
             self.clear();
+            self.restarted = true;
         }
         refused
     }
@@ -465,6 +469,14 @@ impl Validator {
     pub fn clear(&mut self) {
         self.recent.clear();
         self.refusals = 0;
+        self.restarted = false;
+    }
+
+    /// True while a run of refusals has cleared the level and too few matches have been
+    /// checked since to set a new one.
+    #[must_use]
+    pub fn restarting(&self) -> bool {
+        self.restarted && self.recent.len() < MIN_HISTORY
     }
 }
 
