@@ -64,7 +64,9 @@ pub struct ValidationParams {
     pub search: bool,
     /// After this many refusals in a row the running level starts afresh: a run of poor
     /// matches is a change of scene (new ground, a crowd), not one wrong match, and the map
-    /// must grow into it. Default 3.
+    /// must grow into it. Until enough matches set the new level, the share the prediction
+    /// explains stands in for it: a match more than `max_share_drop` below that falls back to
+    /// the prediction and stays out of the map. Default 3.
     pub max_refusals: usize,
     /// A match whose pose differs from the odometry prediction by more than this squared
     /// Mahalanobis distance, under the motion model's covariance (`[matcher.motion]`), is
