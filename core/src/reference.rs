@@ -643,20 +643,17 @@ impl<I: SpatialIndex> Reference<I> {
         let side = merge.cell_size;
         let mut around = std::mem::take(&mut self.around);
         self.cell_search(c, side, &mut around);
-        // Counted first: a cell with room, the common case, gathers nothing.
-        let points = self.index.points();
-        let members = || {
-            around
-                .iter()
-                .map(|n| n.id)
-                .filter(|&id| self.live[id as usize] && cell_of(&points[id as usize], side) == c)
-        };
-        let full = members().count() >= merge.max_cell_points as usize;
-        let stalest = (full && merge.full_cell != FullCell::Skip)
-            .then(|| members().min_by_key(|&id| (self.confirmed[id as usize], id)))
-            .flatten();
+        // One pass counts the cell and finds its stalest point; a cell with room, the common
+        // case, gathers nothing.
+        let stalest_key = |id: PointId| (self.confirmed[id as usize], id);
+        let (count, stalest) =
+            self.in_cell(&around, c, side)
+                .fold((0usize, None::<PointId>), |(n, best), id| {
+                    let best = best.filter(|&b| stalest_key(b) <= stalest_key(id));
+                    (n + 1, best.or(Some(id)))
+                });
         self.around = around;
-        if !full {
+        if count < merge.max_cell_points as usize {
             return true;
         }
         if merge.full_cell == FullCell::Skip {
@@ -685,16 +682,26 @@ impl<I: SpatialIndex> Reference<I> {
         self.index.within_radius(&centre, reach, around);
     }
 
+    /// The live points of cell `c` (side `side`) among `around`, the result of
+    /// [`Reference::cell_search`], by id.
+    fn in_cell<'a>(
+        &'a self,
+        around: &'a [Neighbour],
+        c: (i64, i64),
+        side: f64,
+    ) -> impl Iterator<Item = PointId> + 'a {
+        let points = self.index.points();
+        around
+            .iter()
+            .map(|n| n.id)
+            .filter(move |&id| self.live[id as usize] && cell_of(&points[id as usize], side) == c)
+    }
+
     /// The live points of cell `c` (side `side`), by id.
     fn cell_members(&mut self, c: (i64, i64), side: f64) -> Vec<PointId> {
         let mut around = std::mem::take(&mut self.around);
         self.cell_search(c, side, &mut around);
-        let points = self.index.points();
-        let members = around
-            .iter()
-            .map(|n| n.id)
-            .filter(|&id| self.live[id as usize] && cell_of(&points[id as usize], side) == c)
-            .collect();
+        let members = self.in_cell(&around, c, side).collect();
         self.around = around;
         members
     }

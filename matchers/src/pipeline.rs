@@ -687,7 +687,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             }
         }
         let passed = result.fallback.is_none() && level.is_some() && !is_poor(fit, level);
-        let restarting = level.is_none() && self.validator.restarting();
+        let restarting = self.validator.restarting();
         if result.fallback.is_none() {
             self.validator.record(fit);
             check.inlier_share = fit.share;
