@@ -551,6 +551,10 @@ pub struct Pipeline<M, I> {
     trail: Trail,
     /// The latest spread correction not yet taken ([`Odometry::take_amendment`]).
     amendment: Option<Amendment>,
+    /// The record (as the trail counts them) whose match odometry's veto last held at the
+    /// prediction: a later match of the same run on old ground that the scan lets outweigh
+    /// the veto closes a loop ([`RevisitParams::deform_followed`]).
+    held: Option<usize>,
     search: CorrelativeSearch,
     /// Odometry's scale and drift, fitted to the accepted matches.
     calibration: OdometryCalibration,
@@ -592,6 +596,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             renumberings: 0,
             trail: Trail::new(RevisitParams::default().age_scans),
             amendment: None,
+            held: None,
             first_reading: None,
             odometry_moved: false,
             calibration: OdometryCalibration::default(),
@@ -810,6 +815,27 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         self.amendment = Some(amendment);
     }
 
+    /// A match followed against odometry's veto (`matched`, in the reference frame, against
+    /// the prediction `guess`) on old ground, after the veto held an earlier match of the
+    /// same run on old ground at its prediction, closes a loop: the scans have pulled towards
+    /// the old map against odometry at least twice, the second time by enough points to
+    /// outweigh it. Its correction of the prediction is the drift of the stretch since the
+    /// robot left old ground, and is spread over it as a re-anchoring's is
+    /// ([`RevisitParams::deform_followed`]). A lone odometry glitch (one reading off, the
+    /// match right) is followed without a spread: no veto held a match before it.
+    fn close_followed(&mut self, matched: &Pose2, guess: &Pose2) {
+        if !(self.spreads() && self.revisit.params().deform_followed) {
+            return;
+        }
+        let followed = self.reference_frame * *matched;
+        let after_hold = self
+            .held
+            .is_some_and(|held| held >= self.trail.old_run_start());
+        if after_hold && self.trail.on_old_ground(&followed) {
+            self.deform(followed * (self.reference_frame * *guess).inverse());
+        }
+    }
+
     fn update_reference(&mut self, record: &Record, laser: &Pose2, result: &MatchResult) -> bool {
         let matched = Matched {
             scan: &record.scan,
@@ -922,11 +948,14 @@ where
         {
             let local = record.scan.points();
             let gained = || (check.inlier_share - self.share(local, &guess)) * local.len() as f64;
-            if !self
+            if self
                 .validator
                 .outweighs_odometry(gained, &lambda, &guess, &result.pose)
             {
+                self.close_followed(&result.pose, &guess);
+            } else {
                 result = MatchResult::fallback(guess, Fallback::Refused);
+                self.held = Some(self.trail.records());
             }
         }
         let laser = self.reference_frame * result.pose;

@@ -85,6 +85,15 @@ pub struct RevisitParams {
     /// moved stretch then lies nearer the old map. Default true. False leaves the drifted
     /// stretch where it was laid, and the estimate jumps.
     pub deform: bool,
+    /// Spread a loop closed by the ordinary match as well: on old ground, a match that
+    /// odometry's veto would hold but the scan's points outweigh, after the veto held an
+    /// earlier match of the same run on old ground, corrects the drift of the stretch since
+    /// the robot left old ground, and its correction of the prediction is spread as a
+    /// re-anchoring's is (with `deform`, and the same check that the moved stretch lies
+    /// nearer the old map). Default true. The matches creep onto the old map there, each
+    /// within the look-ups' gain of the last, so no look-up re-anchors; without this the
+    /// stretch stays where it drifted. A lone odometry glitch is followed without a spread.
+    pub deform_followed: bool,
 }
 
 /// Two look-ups' corrections agree when, applied to the same match, they differ by less
@@ -106,6 +115,7 @@ impl Default for RevisitParams {
             confirmations: 2,
             confirm_gap: 8,
             deform: true,
+            deform_followed: true,
         }
     }
 }

@@ -163,21 +163,41 @@ impl Trail {
         let before = self.path.last().copied().unwrap_or(0.0);
         self.path.push(before + step);
         self.last = Some(here);
+        let old = self.on_old_ground(laser);
+        self.old_ground.push(old);
+        // A record on new ground ends the run the kept matches vouched for.
+        if !old {
+            self.vouches.clear();
+        }
+    }
+
+    /// Whether a laser at `laser` (in the world) is on old ground: in a cell, or beside one,
+    /// where a scan was laid `age` insertions or more ago (or the map's first scan, which
+    /// sets its frame). Before any scan entered the map, everywhere is.
+    #[must_use]
+    pub fn on_old_ground(&self, laser: &Pose2) -> bool {
         let n = self.visits.len();
         let (cx, cy) = cell(laser);
-        let old = n == 0
+        n == 0
             || (-1..=1).any(|dx| {
                 (-1..=1).any(|dy| {
                     self.first_in
                         .get(&(cx.saturating_add(dx), cy.saturating_add(dy)))
                         .is_some_and(|&first| first == 0 || first + self.age <= n)
                 })
-            });
-        self.old_ground.push(old);
-        // A record on new ground ends the run the kept matches vouched for.
-        if !old {
-            self.vouches.clear();
+            })
+    }
+
+    /// The first record of the newest run on old ground: [`Trail::records`] when the newest
+    /// record lies on new ground (or none was noted).
+    #[must_use]
+    pub fn old_run_start(&self) -> usize {
+        let old = &self.old_ground;
+        let mut back = old.len();
+        while back > 0 && old[back - 1] {
+            back -= 1;
         }
+        back
     }
 
     /// Notes that the scan of the last record noted entered the map as scan `stamp`, laid
@@ -510,6 +530,20 @@ mod tests {
         let poses = long_run_on_old_ground();
         let a = spread(&vouched_trail(&poses, &[50]), |_| true);
         assert_eq!(a.records(), 91..poses.len());
+    }
+
+    #[test]
+    fn the_run_on_old_ground_starts_where_the_loop_came_back() {
+        // Back on old ground (within 3 m of the origin) from record 91, (0, 3), on.
+        let poses = square_loop(0, 0.0);
+        let t = trail(10, &poses);
+        assert_eq!(t.old_run_start(), 91);
+        assert!(t.on_old_ground(&Pose2::new(0.5, 0.5, 0.0)));
+        assert!(!t.on_old_ground(&Pose2::new(10.0, 10.0, 0.0)));
+        // On new ground the run has not begun: the next record would start one.
+        let t = trail(10, &poses[..60]);
+        assert_eq!(t.old_run_start(), 60);
+        assert_eq!(Trail::new(10).old_run_start(), 0);
     }
 
     #[test]
