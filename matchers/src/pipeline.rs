@@ -822,16 +822,23 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// outweigh it. Its correction of the prediction is the drift of the stretch since the
     /// robot left old ground, and is spread over it as a re-anchoring's is
     /// ([`RevisitParams::deform_followed`]). A lone odometry glitch (one reading off, the
-    /// match right) is followed without a spread: no veto held a match before it.
+    /// match right) is followed without a spread: no veto held a match before it. So is a
+    /// correction after an excursion shorter than the map's age (`age_scans` records: a
+    /// few records whose stamps stand out of order, a look through a door): a stretch that
+    /// short holds no loop's drift.
     fn close_followed(&mut self, matched: &Pose2, guess: &Pose2) {
-        if !(self.spreads() && self.revisit.params().deform_followed) {
+        let params = self.revisit.params();
+        if !(self.spreads() && params.deform_followed) {
             return;
         }
         let followed = self.reference_frame * *matched;
         let after_hold = self
             .held
             .is_some_and(|held| held >= self.trail.old_run_start());
-        if after_hold && self.trail.on_old_ground(&followed) {
+        if after_hold
+            && self.trail.excursion() >= params.age_scans
+            && self.trail.on_old_ground(&followed)
+        {
             self.deform(followed * (self.reference_frame * *guess).inverse());
         }
     }

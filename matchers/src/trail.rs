@@ -200,6 +200,24 @@ impl Trail {
         back
     }
 
+    /// The records of the newest run on new ground that ended before the newest run on old
+    /// ground: how far the robot went before it came back (0 when the newest record lies
+    /// on new ground, or the trail never left old ground since its last spread).
+    #[must_use]
+    pub fn excursion(&self) -> usize {
+        let old = &self.old_ground;
+        let anchored = self.anchored.min(old.len());
+        let back = self.old_run_start().max(anchored);
+        if back == old.len() {
+            return 0;
+        }
+        let mut first = back;
+        while first > anchored && !old[first - 1] {
+            first -= 1;
+        }
+        back - first
+    }
+
     /// Notes that the scan of the last record noted entered the map as scan `stamp`, laid
     /// from `laser` (in the world).
     pub fn inserted(&mut self, stamp: u32, laser: &Pose2) {
@@ -541,9 +559,13 @@ mod tests {
         assert!(t.on_old_ground(&Pose2::new(0.5, 0.5, 0.0)));
         assert!(!t.on_old_ground(&Pose2::new(10.0, 10.0, 0.0)));
         // On new ground the run has not begun: the next record would start one.
+        // It came back from 73 records on new ground, (4, 0) to (0, 4).
+        assert_eq!(t.excursion(), 73);
         let t = trail(10, &poses[..60]);
         assert_eq!(t.old_run_start(), 60);
+        assert_eq!(t.excursion(), 0);
         assert_eq!(Trail::new(10).old_run_start(), 0);
+        assert_eq!(Trail::new(10).excursion(), 0);
     }
 
     #[test]
