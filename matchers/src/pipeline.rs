@@ -824,8 +824,9 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// ([`RevisitParams::deform_followed`]). A lone odometry glitch (one reading off, the
     /// match right) is followed without a spread: no veto held a match before it. So is a
     /// correction after an excursion shorter than the map's age (`age_scans` records: a
-    /// few records whose stamps stand out of order, a look through a door): a stretch that
-    /// short holds no loop's drift.
+    /// few records whose stamps stand out of order, a look through a door), which holds no
+    /// loop's drift, and one more than `age_scans` records after the robot came back: the
+    /// loop closed then, and a drift on old ground is the re-anchoring's to find.
     fn close_followed(&mut self, matched: &Pose2, guess: &Pose2) {
         let params = self.revisit.params();
         if !(self.spreads() && params.deform_followed) {
@@ -835,10 +836,10 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         let after_hold = self
             .held
             .is_some_and(|held| held >= self.trail.old_run_start());
-        if after_hold
-            && self.trail.excursion() >= params.age_scans
-            && self.trail.on_old_ground(&followed)
-        {
+        // Back from an excursion of `age_scans` records or more, within as many records.
+        let back = self.trail.records() - self.trail.old_run_start() <= params.age_scans
+            && self.trail.excursion() >= params.age_scans;
+        if after_hold && back && self.trail.on_old_ground(&followed) {
             self.deform(followed * (self.reference_frame * *guess).inverse());
         }
     }

@@ -87,13 +87,14 @@ pub struct RevisitParams {
     pub deform: bool,
     /// Spread a loop closed by the ordinary match as well: on old ground, a match that
     /// odometry's veto would hold but the scan's points outweigh, after the veto held an
-    /// earlier match of the same run on old ground and after a run of at least `age_scans`
-    /// records on new ground, corrects the drift of that run, and its correction of the
-    /// prediction is spread as a re-anchoring's is (with `deform`, and the same check that
-    /// the moved stretch lies nearer the old map). Default true. The matches creep onto the
-    /// old map there, each within the look-ups' gain of the last, so no look-up re-anchors;
-    /// without this the stretch stays where it drifted. A lone odometry glitch, or a
-    /// correction after a shorter excursion, is followed without a spread.
+    /// earlier match of the same run on old ground, within `age_scans` records of coming
+    /// back from at least as many on new ground, corrects the drift of that run, and its
+    /// correction of the prediction is spread as a re-anchoring's is (with `deform`, and the
+    /// same check that the moved stretch lies nearer the old map). Default true. The matches
+    /// creep onto the old map there, each within the look-ups' gain of the last, so no
+    /// look-up re-anchors; without this the stretch stays where it drifted. A lone odometry
+    /// glitch, a correction after a shorter excursion or long after the return, is followed
+    /// without a spread.
     pub deform_followed: bool,
 }
 
