@@ -158,7 +158,7 @@ fn mirrored() -> (Vec<qicp_core::Record>, Vec<qicp::logs::relations::Relation>) 
 
 /// Mirrored, q-plicp comes back to the start of its first loop (record 1,846) by matches
 /// that creep onto the old map, each within the look-ups' gain of the last, so no look-up
-/// re-anchors: odometry's veto held one of them at its prediction, and a later one followed
+/// re-anchors: odometry's veto held some of them at the prediction, and a later one followed
 /// the scan's points against the veto. Left there, the stretch since the robot left old
 /// ground kept its drift, and relations across it were off by up to 0.57 m (22 above 0.5 m
 /// in the whole log as the Python script mirrors it). The followed match's correction is now

@@ -558,9 +558,9 @@ mod tests {
         assert_eq!(t.old_run_start(), 91);
         assert!(t.on_old_ground(&Pose2::new(0.5, 0.5, 0.0)));
         assert!(!t.on_old_ground(&Pose2::new(10.0, 10.0, 0.0)));
-        // On new ground the run has not begun: the next record would start one.
         // It came back from 73 records on new ground, (4, 0) to (0, 4).
         assert_eq!(t.excursion(), 73);
+        // On new ground the run has not begun: the next record would start one.
         let t = trail(10, &poses[..60]);
         assert_eq!(t.old_run_start(), 60);
         assert_eq!(t.excursion(), 0);
