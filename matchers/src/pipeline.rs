@@ -833,13 +833,14 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             return;
         }
         let followed = self.reference_frame * *matched;
-        let after_hold = self
-            .held
-            .is_some_and(|held| held >= self.trail.old_run_start());
-        // Back from an excursion of `age_scans` records or more, within as many records.
-        let back = self.trail.records() - self.trail.old_run_start() <= params.age_scans
-            && self.trail.excursion() >= params.age_scans;
-        if after_hold && back && self.trail.on_old_ground(&followed) {
+        // Back from an excursion of `age_scans` records or more, within as many records, and
+        // the veto held a match since.
+        let closes = self.trail.came_back().is_some_and(|(back, excursion)| {
+            excursion >= params.age_scans
+                && self.trail.records() - back <= params.age_scans
+                && self.held.is_some_and(|held| held >= back)
+        });
+        if closes && self.trail.on_old_ground(&followed) {
             self.deform(followed * (self.reference_frame * *guess).inverse());
         }
     }

@@ -188,34 +188,31 @@ impl Trail {
             })
     }
 
-    /// The first record of the newest run on old ground: [`Trail::records`] when the newest
-    /// record lies on new ground (or none was noted).
-    #[must_use]
-    pub fn old_run_start(&self) -> usize {
-        let old = &self.old_ground;
-        let mut back = old.len();
-        while back > 0 && old[back - 1] {
-            back -= 1;
-        }
-        back
-    }
-
-    /// The records of the newest run on new ground that ended before the newest run on old
-    /// ground: how far the robot went before it came back (0 when the newest record lies
-    /// on new ground, or the trail never left old ground since its last spread).
-    #[must_use]
-    pub fn excursion(&self) -> usize {
+    /// Since the last spread, the run of records on new ground before the newest run on old
+    /// ground, and that run: `(first, back)`, records `first..back` on new ground and
+    /// `back..` on old ground (`back` is [`Trail::records`] while the newest lies on new
+    /// ground, and `first == back` where the trail has not left old ground).
+    fn runs(&self) -> (usize, usize) {
         let old = &self.old_ground;
         let anchored = self.anchored.min(old.len());
-        let back = self.old_run_start().max(anchored);
-        if back == old.len() {
-            return 0;
+        let mut back = old.len();
+        while back > anchored && old[back - 1] {
+            back -= 1;
         }
         let mut first = back;
         while first > anchored && !old[first - 1] {
             first -= 1;
         }
-        back - first
+        (first, back)
+    }
+
+    /// The newest return to old ground since the last spread: the record it began at and
+    /// the records of the run on new ground before it (how far the robot went). None while
+    /// the newest record lies on new ground, or the trail has not left old ground.
+    #[must_use]
+    pub fn came_back(&self) -> Option<(usize, usize)> {
+        let (first, back) = self.runs();
+        (first < back && back < self.old_ground.len()).then_some((back, back - first))
     }
 
     /// Notes that the scan of the last record noted entered the map as scan `stamp`, laid
@@ -269,17 +266,9 @@ impl Trail {
         mut pinned: impl FnMut(&Vouch) -> bool,
     ) -> Option<Amendment> {
         let old = &self.old_ground;
-        let anchored = self.anchored.min(old.len());
-        // Back from the newest record: the run on old ground that leads to the revisit…
-        let mut back = old.len();
-        while back > anchored && old[back - 1] {
-            back -= 1;
-        }
-        // … and before it the run on new ground.
-        let mut first = back;
-        while first > anchored && !old[first - 1] {
-            first -= 1;
-        }
+        // Back from the newest record: the run on old ground that leads to the revisit, and
+        // before it the run on new ground.
+        let (mut first, back) = self.runs();
         if first == back {
             return None;
         }
@@ -554,18 +543,19 @@ mod tests {
     fn the_run_on_old_ground_starts_where_the_loop_came_back() {
         // Back on old ground (within 3 m of the origin) from record 91, (0, 3), on.
         let poses = square_loop(0, 0.0);
+        // after 73 records on new ground, (4, 0) to (0, 4).
         let t = trail(10, &poses);
-        assert_eq!(t.old_run_start(), 91);
+        assert_eq!(t.came_back(), Some((91, 73)));
         assert!(t.on_old_ground(&Pose2::new(0.5, 0.5, 0.0)));
         assert!(!t.on_old_ground(&Pose2::new(10.0, 10.0, 0.0)));
-        // It came back from 73 records on new ground, (4, 0) to (0, 4).
-        assert_eq!(t.excursion(), 73);
-        // On new ground the run has not begun: the next record would start one.
-        let t = trail(10, &poses[..60]);
-        assert_eq!(t.old_run_start(), 60);
-        assert_eq!(t.excursion(), 0);
-        assert_eq!(Trail::new(10).old_run_start(), 0);
-        assert_eq!(Trail::new(10).excursion(), 0);
+        // On new ground it has not come back; nor has a trail that never left, or one
+        // whose loop was spread over.
+        assert_eq!(trail(10, &poses[..60]).came_back(), None);
+        assert_eq!(trail(10, &poses[..10]).came_back(), None);
+        assert_eq!(Trail::new(10).came_back(), None);
+        let mut t = trail(10, &poses);
+        t.anchored();
+        assert_eq!(t.came_back(), None);
     }
 
     #[test]
