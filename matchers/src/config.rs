@@ -462,13 +462,8 @@ impl MatcherConfig {
                 .unwrap_or(1.0);
             self.relevance.surface_band_sigmas = Some(sigmas);
         }
-        if self.relevance.max_cell_points.is_none() {
-            let resolution = self.relevance.map_resolution.unwrap_or(0.0);
-            self.relevance.max_cell_points = Some(crate::pipeline::two_surfaces_cap(
-                self.relevance.cell_size,
-                resolution,
-            ));
-        }
+        let resolution = self.relevance.map_resolution.unwrap_or(0.0);
+        self.relevance.max_cell_points = Some(self.relevance.cell_cap(resolution));
         if self.relevance.min_novelty.is_none() {
             let share = self.algorithm.min_novelty(&self.section).unwrap_or(0.0);
             self.relevance.min_novelty = Some(share);

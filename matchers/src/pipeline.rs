@@ -204,13 +204,19 @@ impl Relevance {
         Merge {
             resolution,
             cell_size: self.cell_size,
-            max_cell_points: self
-                .max_cell_points
-                .unwrap_or_else(|| two_surfaces_cap(self.cell_size, resolution)),
+            max_cell_points: self.cell_cap(resolution),
             full_cell: self.full_cell,
             surface_band: self.surface_band_sigmas.unwrap_or(matcher_band_sigmas) * range_sigma,
             free_space_margin: self.free_space_margin,
         }
+    }
+
+    /// The cell cap of a map at `resolution` (m): `max_cell_points` where set, else its
+    /// default ([`two_surfaces_cap`]).
+    #[must_use]
+    pub fn cell_cap(&self, resolution: f64) -> u32 {
+        self.max_cell_points
+            .unwrap_or_else(|| two_surfaces_cap(self.cell_size, resolution))
     }
 
     /// Whether a scan at `pose` shows enough the `map` does not hold yet (see
