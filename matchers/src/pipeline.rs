@@ -610,7 +610,9 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         .with_motion_model(MotionModel::default())
     }
 
-    /// Checks matches as `validation` says, searching with `correlative` where they look wrong.
+    /// Checks matches as `validation` says, searching with `correlative` where they look wrong
+    /// (and, with its `start_without_odometry`, starting ICP from it where a log has no
+    /// odometry).
     #[must_use]
     pub fn with_validation(
         mut self,
@@ -659,6 +661,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         scan: &qicp_core::Scan,
         guess: Pose2,
         prior: Option<Matrix3<f64>>,
+        correlative_start: bool,
     ) -> (MatchResult, Check, bool) {
         let mut result = self
             .matcher
@@ -667,6 +670,18 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             return (result, Check::UNCHECKED, false);
         }
         let local = scan.points();
+        // Without odometry, ICP starts again from the search's best pose around the
+        // prediction ([`CorrelativeParams::start_without_odometry`]); the prediction's match
+        // stands where that one finds too few pairs.
+        if correlative_start && let Some(start) = self.search.search(&self.reference, local, &guess)
+        {
+            let again = self
+                .matcher
+                .match_with_prior(&self.reference, scan, start.pose, prior);
+            if again.fallback.is_none() {
+                result = again;
+            }
+        }
         let level = self.validator.threshold();
         let mut fit = match result.fallback {
             None => self.fit(local, &result),
@@ -935,7 +950,10 @@ where
         } else {
             prior
         };
-        let (mut result, mut check, passed) = self.match_checked(&record.scan, guess, weighed);
+        let correlative_start =
+            boosted && stalled && !self.odometry_moved && self.search.params.start_without_odometry;
+        let (mut result, mut check, passed) =
+            self.match_checked(&record.scan, guess, weighed, correlative_start);
         // On a revisit the match may be re-anchored to the old map: a correction of drift,
         // which odometry's veto must not take back.
         // The match's laser pose in the world, before any re-anchoring.

@@ -916,6 +916,121 @@ fn a_log_without_odometry_is_followed_at_the_matched_velocity() {
     }
 }
 
+/// WSM whose first match of each of the records `wrong_from..=wrong_to` (its match from the
+/// prediction) converges into the wrong basin ([`turned`]); its other matches are right.
+#[derive(Debug)]
+struct WrongFromThePrediction {
+    inner: Plain,
+    record: usize,
+    stamp: Option<f64>,
+    wrong: std::ops::RangeInclusive<usize>,
+}
+
+impl ScanMatcher for WrongFromThePrediction {
+    fn name(&self) -> &'static str {
+        "wrong from the prediction"
+    }
+
+    fn match_with_prior<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan: &Scan,
+        guess: Pose2,
+        prior: Option<Matrix3<f64>>,
+    ) -> MatchResult {
+        let first = self.stamp != Some(scan.timestamp);
+        if first {
+            self.stamp = Some(scan.timestamp);
+            self.record = scan.timestamp as usize;
+        }
+        let mut result = self.inner.match_with_prior(reference, scan, guess, prior);
+        if first && self.wrong.contains(&self.record) {
+            result.pose = turned(&result.pose);
+        }
+        result
+    }
+}
+
+/// The robot's pose at scan `k` of a drive through the room whose speed changes every scan,
+/// 0.05 and 0.25 m in turn, so that a constant velocity mispredicts each scan by 0.2 m.
+fn jerky(k: usize) -> Pose2 {
+    let x = (0..k)
+        .map(|i| if i % 2 == 0 { 0.05 } else { 0.25 })
+        .sum::<f64>();
+    Pose2::new(-2.5 + x, 0.3, 0.01 * k as f64)
+}
+
+/// q-wsm's pipeline on the jerky drive without odometry, its match from the prediction wrong
+/// at records 12 to 14 and the check's search off: the worst error (m) of the estimate's
+/// motion since scan 0.
+fn jerky_without_odometry(correlative_start: bool) -> f64 {
+    let validation = ValidationParams {
+        search: false,
+        ..ValidationParams::default()
+    };
+    let correlative = CorrelativeParams {
+        start_without_odometry: correlative_start,
+        ..CorrelativeParams::default()
+    };
+    let mut pipeline = Pipeline::new(
+        "q-wsm",
+        WrongFromThePrediction {
+            inner: Plain::new(IcpParams::default(), WsmParams::default()),
+            record: 0,
+            stamp: None,
+            wrong: 12..=14,
+        },
+        QuadTree::default(),
+        Policy::Boosted(Relevance::default()),
+        LaserNoise::default(),
+    )
+    .with_validation(validation, correlative);
+    let mut first = None;
+    let mut worst = 0.0f64;
+    for k in 0..25 {
+        let e = pipeline.process(&room_record_at(&jerky(k), k, Pose2::IDENTITY));
+        let first = *first.get_or_insert(e.pose);
+        worst = worst.max(
+            first
+                .between(&e.pose)
+                .distance(&jerky(0).between(&jerky(k))),
+        );
+    }
+    worst
+}
+
+#[test]
+fn without_odometry_icp_starts_again_from_the_correlative_search() {
+    // Without the start, each wrong match is refused and the constant-velocity prediction
+    // stands, 0.2-0.4 m off the jerky drive; with it, ICP run again from the search's pose
+    // finds the right one. (The check's search is off, so only the start can recover.)
+    let without = jerky_without_odometry(false);
+    assert!(without > 0.15, "without the start: {without:.3} m");
+    let with = jerky_without_odometry(true);
+    assert!(with < 0.02, "with the start: {with:.3} m");
+}
+
+#[test]
+fn the_correlative_start_leaves_a_log_with_odometry_as_it_was() {
+    // The room drive, its odometry slipping by 0.3 m and 6° at scan 12: every estimate the
+    // same with the start on as off, for each boosted matcher.
+    let slip = Pose2::new(0.3, 0.0, 6f64.to_radians());
+    for kind in [MatcherKind::QWsm, MatcherKind::QIdc] {
+        let run = |start: bool| {
+            let mut config = MatcherConfig::defaults(kind);
+            config.correlative.start_without_odometry = start;
+            let mut odometry = config.build().expect("builds");
+            (0..30)
+                .map(|k| {
+                    let e = odometry.process(&record(k, slipping_odometry(k, 12, slip)));
+                    (e.pose, e.inserted, e.check.withheld)
+                })
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(run(true), run(false), "{kind}");
+    }
+}
+
 /// Twelve posts on a ring of 3 m about the origin, one every 30°: turned by 30° about the
 /// centre, a scan from there lands on the posts again, point for point.
 fn ring_of_posts() -> SyntheticWorld {
