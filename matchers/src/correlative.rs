@@ -26,9 +26,10 @@ pub struct CorrelativeParams {
     pub sigma: f64,
     /// In a log without odometry (no reading has moved), against a map, once a match has
     /// moved off the repeated reading: each scan's ICP is run again from this search's best
-    /// pose around the constant-velocity prediction, and that match replaces the
-    /// prediction's unless it finds too few pairs. Cartographer's real-time correlative scan
-    /// matcher gives its local match a start the same way where odometry is poor or absent.
+    /// pose around the constant-velocity prediction (the prediction's prior centred there),
+    /// and that match replaces the prediction's unless it finds too few pairs. Cartographer's
+    /// real-time correlative scan matcher gives its local match a start, and the centre of its
+    /// priors, the same way where odometry is poor or absent.
     /// Default false: it costs about nine times the time per scan (q-plicp on Intel without
     /// odometry: 2.8 ms against 0.31 ms). docs/robustness.md ("A correlative start without
     /// odometry") has its sweeps. Logs with odometry are matched as without it.
