@@ -916,12 +916,12 @@ fn a_log_without_odometry_is_followed_at_the_matched_velocity() {
     }
 }
 
-/// WSM whose first match of each of the records `wrong_from..=wrong_to` (its match from the
-/// prediction) converges into the wrong basin ([`turned`]); its other matches are right.
+/// WSM whose first match of each record in `wrong` (records numbered by their stamps; the
+/// first match is the one from the prediction) converges into the wrong basin
+/// ([`turned`]); its other matches are right.
 #[derive(Debug)]
 struct WrongFromThePrediction {
     inner: Plain,
-    record: usize,
     stamp: Option<f64>,
     wrong: std::ops::RangeInclusive<usize>,
 }
@@ -938,13 +938,9 @@ impl ScanMatcher for WrongFromThePrediction {
         guess: Pose2,
         prior: Option<Matrix3<f64>>,
     ) -> MatchResult {
-        let first = self.stamp != Some(scan.timestamp);
-        if first {
-            self.stamp = Some(scan.timestamp);
-            self.record = scan.timestamp as usize;
-        }
+        let first = self.stamp.replace(scan.timestamp) != Some(scan.timestamp);
         let mut result = self.inner.match_with_prior(reference, scan, guess, prior);
-        if first && self.wrong.contains(&self.record) {
+        if first && self.wrong.contains(&(scan.timestamp as usize)) {
             result.pose = turned(&result.pose);
         }
         result
@@ -976,7 +972,6 @@ fn jerky_without_odometry(correlative_start: bool) -> f64 {
         "q-wsm",
         WrongFromThePrediction {
             inner: Plain::new(IcpParams::default(), WsmParams::default()),
-            record: 0,
             stamp: None,
             wrong: 12..=14,
         },
