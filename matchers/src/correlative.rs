@@ -25,9 +25,9 @@ pub struct CorrelativeParams {
     /// Standard deviation of the likelihood around each reference point (m). Default 0.1.
     pub sigma: f64,
     /// In a log without odometry (no reading has moved), against a map, once a match has
-    /// moved off the repeated reading: each scan's ICP is run again from this search's best
+    /// moved off the repeated reading: each scan's ICP starts from this search's best
     /// pose around the constant-velocity prediction (the prediction's prior centred there),
-    /// and that match replaces the prediction's unless it finds too few pairs. Cartographer's
+    /// and from the prediction only where that match finds too few pairs. Cartographer's
     /// real-time correlative scan matcher gives its local match a start, and the centre of its
     /// priors, the same way where odometry is poor or absent.
     /// Default false: it costs about nine times the time per scan (q-plicp on Intel without

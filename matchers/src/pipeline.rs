@@ -663,24 +663,26 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         prior: Option<Matrix3<f64>>,
         correlative_start: bool,
     ) -> (MatchResult, Check, bool) {
-        let mut result = self
-            .matcher
-            .match_with_prior(&self.reference, scan, guess, prior);
+        let local = scan.points();
+        // Without odometry, ICP starts from the search's best pose around the prediction
+        // ([`CorrelativeParams::start_without_odometry`]), and from the prediction only where
+        // that match finds too few pairs.
+        let started = (correlative_start && self.validator.params.enabled)
+            .then(|| self.search.search(&self.reference, local, &guess))
+            .flatten()
+            .map(|start| {
+                self.matcher
+                    .match_with_prior(&self.reference, scan, start.pose, prior)
+            })
+            .filter(|m| m.fallback.is_none());
+        let mut result = match started {
+            Some(m) => m,
+            None => self
+                .matcher
+                .match_with_prior(&self.reference, scan, guess, prior),
+        };
         if !self.validator.params.enabled {
             return (result, Check::UNCHECKED, false);
-        }
-        let local = scan.points();
-        // Without odometry, ICP starts again from the search's best pose around the
-        // prediction ([`CorrelativeParams::start_without_odometry`]); the prediction's match
-        // stands where that one finds too few pairs.
-        if correlative_start && let Some(start) = self.search.search(&self.reference, local, &guess)
-        {
-            let again = self
-                .matcher
-                .match_with_prior(&self.reference, scan, start.pose, prior);
-            if again.fallback.is_none() {
-                result = again;
-            }
         }
         let level = self.validator.threshold();
         let mut fit = match result.fallback {
@@ -943,15 +945,15 @@ where
         // nothing: a scan that pins only some directions (a corridor) keeps the
         // constant-velocity prediction in the others, rather than slide and write a shifted
         // copy of its walls into the map.
+        let without_odometry = stalled && boosted && !self.odometry_moved;
         let weighed = if stalled {
-            (boosted && !self.odometry_moved)
+            without_odometry
                 .then(|| self.motion.stall_information(&self.velocity))
                 .flatten()
         } else {
             prior
         };
-        let correlative_start =
-            boosted && stalled && !self.odometry_moved && self.search.params.start_without_odometry;
+        let correlative_start = without_odometry && self.search.params.start_without_odometry;
         let (mut result, mut check, passed) =
             self.match_checked(&record.scan, guess, weighed, correlative_start);
         // On a revisit the match may be re-anchored to the old map: a correction of drift,
