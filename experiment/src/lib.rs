@@ -48,7 +48,8 @@
 //! config's), each in `DIR/world-<layout seed>/` without pictures; `DIR/worlds.json` and the
 //! printed table give the median, minimum and maximum of every figure over the worlds. One
 //! layout or one noise draw can be lucky or unlucky; the medians are what a method should be
-//! judged by. (The corridor's layout is fixed; there only the noise changes.)
+//! judged by. (The plain corridor's layout is fixed, and there only the noise changes; the
+//! office floors of `configs/worlds/office.toml` draw a layout from each seed.)
 //!
 //! A simulated drive is short and held in memory. A log is not: it is read once to count its
 //! scans, once for raw odometry, once by every matcher as it matches (`stream`) and once more

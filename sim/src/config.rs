@@ -29,8 +29,8 @@ mod world;
 
 pub use robot::{DriveConfig, LaserConfig, RobotConfig};
 pub use validate::{
-    MAX_BEAMS, MAX_ENCODER_NOISE, MAX_WAYPOINT_TOLERANCE, MAX_WORLD_SIZE, MIN_LASER_RATE_HZ,
-    MIN_ZIGZAG_PERIOD,
+    MAX_BEAMS, MAX_ENCODER_NOISE, MAX_FURNITURE, MAX_WAYPOINT_TOLERANCE, MAX_WORLD_SIZE,
+    MIN_LASER_RATE_HZ, MIN_ZIGZAG_PERIOD,
 };
 pub use world::{CorridorConfig, ObstacleConfig, ParkConfig, WorldConfig, WorldKind};
 

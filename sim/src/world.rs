@@ -238,7 +238,7 @@ impl World {
         let robot_radius = Vector2::new(cfg.robot.size[0], cfg.robot.size[1]).norm() / 2.0;
         let mut world = match cfg.world.kind {
             WorldKind::Park => park(&cfg.park(), cfg.world.seed, robot_radius)?,
-            WorldKind::Corridor => corridor(&cfg.corridor()),
+            WorldKind::Corridor => corridor(&cfg.corridor(), cfg.world.seed),
             WorldKind::Custom => World {
                 kind: WorldKind::Custom,
                 obstacles: Vec::new(),
@@ -454,7 +454,7 @@ type SideMap = fn(f64, f64, f64, f64) -> Point2<f64>;
 /// row of outer rooms, the corridor (between its outer and inner wall, both with one doorway
 /// per room), a row of inner rooms and the wall of a closed core. The route runs
 /// counter-clockwise along the corridor, zigzagging between its walls.
-fn corridor(c: &CorridorConfig) -> World {
+fn corridor(c: &CorridorConfig, seed: u64) -> World {
     let [w, h] = c.size;
     let (o, cw, i, t) = (
         c.outer_room_depth,
@@ -462,6 +462,9 @@ fn corridor(c: &CorridorConfig) -> World {
         c.inner_room_depth,
         c.wall_thickness,
     );
+    // The layout's draws (doorways, furniture); none where the config asks for no variation,
+    // so the default floor is one layout whatever the seed.
+    let mut rng = Noise::new(seed, 0x6f6666696365);
     // Side frames: `u` runs along the side (counter-clockwise), `d` is the depth from the
     // floor's edge inwards.
     let sides: [(f64, SideMap); 4] = [
@@ -475,41 +478,47 @@ fn corridor(c: &CorridorConfig) -> World {
     let centre = o + cw / 2.0;
     for (len, map) in sides {
         let at = |u: f64, d: f64| map(u, d, w, h);
+        let mut walls = Vec::new();
         let mut wall = |u0: f64, u1: f64, d: f64, doors: &[f64]| {
             // Split the wall at each doorway.
             let mut start = u0;
             for &door in doors {
                 let (g0, g1) = (door - c.door_width / 2.0, door + c.door_width / 2.0);
                 if g0 - start > 1e-3 {
-                    obstacles.push(Obstacle::wall(at(start, d), at(g0, d), t));
+                    walls.push(Obstacle::wall(at(start, d), at(g0, d), t));
                 }
                 start = g1;
             }
             if u1 - start > 1e-3 {
-                obstacles.push(Obstacle::wall(at(start, d), at(u1, d), t));
+                walls.push(Obstacle::wall(at(start, d), at(u1, d), t));
             }
         };
         // Outer wall of the floor.
         wall(0.0, len, 0.0, &[]);
         // Outer rooms: between the floor's edge and the corridor, one doorway each.
-        let (a, b) = (o, len - o);
-        let n = ((b - a) / c.room_width).round().max(1.0) as usize;
-        let step = (b - a) / n as f64;
-        let doors: Vec<f64> = (0..n).map(|k| a + step * (k as f64 + 0.5)).collect();
-        wall(a, b, o, &doors);
-        let mut partitions: Vec<(f64, f64, f64)> =
-            (0..=n).map(|k| (a + step * k as f64, 0.0, o)).collect();
+        let outer = Rooms::along(o, len - o, c.room_width, (0.0, o));
+        wall(o, len - o, o, &outer.doors(c, &mut rng));
         // Inner rooms: between the corridor and the core.
-        let (a, b) = (o + cw + i, len - o - cw - i);
-        let n = ((b - a) / c.room_width).round().max(1.0) as usize;
-        let step = (b - a) / n as f64;
-        let doors: Vec<f64> = (0..n).map(|k| a + step * (k as f64 + 0.5)).collect();
-        wall(o + cw, len - o - cw, o + cw, &doors);
-        partitions.extend((0..=n).map(|k| (a + step * k as f64, o + cw, o + cw + i)));
-        wall(a, b, o + cw + i, &[]);
-        for (u, d0, d1) in partitions {
-            obstacles.push(Obstacle::wall(at(u, d0), at(u, d1), t));
+        let inner = Rooms::along(
+            o + cw + i,
+            len - o - cw - i,
+            c.room_width,
+            (o + cw, o + cw + i),
+        );
+        wall(o + cw, len - o - cw, o + cw, &inner.doors(c, &mut rng));
+        wall(inner.start, inner.end, o + cw + i, &[]);
+        for rooms in [&outer, &inner] {
+            for k in 0..=rooms.count {
+                let u = rooms.start + rooms.step * k as f64;
+                walls.push(Obstacle::wall(
+                    at(u, rooms.depth.0),
+                    at(u, rooms.depth.1),
+                    t,
+                ));
+            }
+            walls.extend(rooms.furniture(c, &mut rng, &at));
         }
+        obstacles.append(&mut walls);
         // Zigzag along this side of the corridor, from corner to corner.
         let (a, b) = (centre, len - centre);
         let n = ((b - a) / (c.zigzag_period / 2.0)).round().max(2.0) as usize;
@@ -532,5 +541,88 @@ fn corridor(c: &CorridorConfig) -> World {
         foliage: Vec::new(),
         route,
         bounds: (Point2::origin(), Point2::new(w, h)),
+    }
+}
+
+/// One row of rooms along a side of the corridor, in the side's frame: `count` rooms of
+/// `step` along it from `start` to `end`, each from depth `depth.0` to `depth.1`.
+struct Rooms {
+    start: f64,
+    end: f64,
+    step: f64,
+    count: usize,
+    depth: (f64, f64),
+}
+
+impl Rooms {
+    /// Rooms from `a` to `b` about `width` wide each.
+    fn along(a: f64, b: f64, width: f64, depth: (f64, f64)) -> Self {
+        let count = ((b - a) / width).round().max(1.0) as usize;
+        Self {
+            start: a,
+            end: b,
+            step: (b - a) / count as f64,
+            count,
+            depth,
+        }
+    }
+
+    /// Where each open doorway's middle lies along the corridor wall: the room's middle,
+    /// shifted by up to `door_offset` within the room, and none where the door is closed.
+    fn doors(&self, c: &CorridorConfig, rng: &mut Noise) -> Vec<f64> {
+        // A doorway keeps clear of its room's partitions.
+        let room = (self.step - c.door_width) / 2.0 - c.wall_thickness;
+        let reach = c.door_offset.min(room.max(0.0));
+        (0..self.count)
+            .filter_map(|k| {
+                let middle = self.start + self.step * (k as f64 + 0.5);
+                let shift = if reach > 0.0 {
+                    rng.uniform(-reach, reach)
+                } else {
+                    0.0
+                };
+                let closed = c.closed_doors > 0.0 && rng.uniform(0.0, 1.0) < c.closed_doors;
+                (!closed).then_some(middle + shift)
+            })
+            .collect()
+    }
+
+    /// Furniture: 0 to `c.furniture` boxes in each room, square to its walls, clear of them.
+    fn furniture(
+        &self,
+        c: &CorridorConfig,
+        rng: &mut Noise,
+        at: &dyn Fn(f64, f64) -> Point2<f64>,
+    ) -> Vec<Obstacle> {
+        let mut boxes = Vec::new();
+        if c.furniture == 0 {
+            return boxes;
+        }
+        // The direction along the side, in the world.
+        let along = at(1.0, 0.0) - at(0.0, 0.0);
+        let angle = along.y.atan2(along.x);
+        let clear = c.wall_thickness / 2.0 + 0.05;
+        for k in 0..self.count {
+            let u0 = self.start + self.step * k as f64 + clear;
+            let u1 = u0 + self.step - 2.0 * clear;
+            let (d0, d1) = (self.depth.0 + clear, self.depth.1 - clear);
+            let n = (rng.uniform(0.0, (c.furniture + 1) as f64) as usize).min(c.furniture);
+            for _ in 0..n {
+                let half = Vector2::new(rng.uniform(0.2, 0.8), rng.uniform(0.2, 0.4));
+                let (u, d) = (rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0));
+                if u1 - u0 <= 2.0 * half.x || d1 - d0 <= 2.0 * half.y {
+                    continue;
+                }
+                boxes.push(Obstacle::Rect {
+                    center: at(
+                        u0 + half.x + u * (u1 - u0 - 2.0 * half.x),
+                        d0 + half.y + d * (d1 - d0 - 2.0 * half.y),
+                    ),
+                    half,
+                    angle,
+                });
+            }
+        }
+        boxes
     }
 }

@@ -146,6 +146,11 @@ fn values_that_crashed_or_hung_the_simulator_are_refused_by_key() {
         ("zigzag_period = 1e-308", "world.corridor.zigzag_period"),
         ("wall_thickness = 100000.0", "world.corridor.wall_thickness"),
         ("wall_thickness = 1.2", "world.corridor.wall_thickness"),
+        ("door_offset = -0.5", "world.corridor.door_offset"),
+        ("door_offset = nan", "world.corridor.door_offset"),
+        ("closed_doors = 1.5", "world.corridor.closed_doors"),
+        ("closed_doors = nan", "world.corridor.closed_doors"),
+        ("furniture = 21", "world.corridor.furniture"),
     ] {
         assert_eq!(invalid_key(&format!("{corridor}{line}\n")), key, "{line}");
     }
@@ -158,6 +163,7 @@ fn values_that_crashed_or_hung_the_simulator_are_refused_by_key() {
         "[robot]\nencoder_noise = 1.0\n".to_string(),
         "[laser]\nrate_hz = 0.01\n".to_string(),
         format!("{corridor}zigzag_period = 0.1\nwall_thickness = 1.19\n"),
+        format!("{corridor}door_offset = 100.0\nclosed_doors = 1.0\nfurniture = 20\n"),
     ] {
         SimConfig::from_toml_str(&text).unwrap_or_else(|e| panic!("{text}: {e}"));
     }

@@ -12,6 +12,8 @@ pub const MAX_BEAMS: usize = 10_000;
 pub const MIN_ZIGZAG_PERIOD: f64 = 0.1;
 /// Largest random encoder error (m/√m): beyond it the encoders report noise, not travel.
 pub const MAX_ENCODER_NOISE: f64 = 1.0;
+/// Most pieces of furniture a corridor world's room may hold (`world.corridor.furniture`).
+pub const MAX_FURNITURE: usize = 20;
 /// Slowest laser (scans per second): one scan a minute and a half.
 pub const MIN_LASER_RATE_HZ: f64 = 0.01;
 /// Largest waypoint tolerance (m): beyond it every waypoint of a route counts as reached.
@@ -91,6 +93,19 @@ impl SimConfig {
             MIN_ZIGZAG_PERIOD,
         )?;
         non_negative("world.corridor.zigzag_amplitude", c.zigzag_amplitude)?;
+        non_negative("world.corridor.door_offset", c.door_offset)?;
+        if !(0.0..=1.0).contains(&c.closed_doors) {
+            return invalid(
+                "world.corridor.closed_doors",
+                format!("is {}: must be a chance from 0 to 1", num(c.closed_doors)),
+            );
+        }
+        if c.furniture > MAX_FURNITURE {
+            return invalid(
+                "world.corridor.furniture",
+                format!("is {}: at most {MAX_FURNITURE} a room", c.furniture),
+            );
+        }
         let core = c.size[0].min(c.size[1])
             - 2.0 * (c.outer_room_depth + c.corridor_width + c.inner_room_depth);
         if core <= 0.0 {

@@ -126,6 +126,17 @@ pub struct CorridorConfig {
     pub zigzag_period: f64,
     /// Sideways offset of the zigzag turning points from the corridor centre (m). Default 0.5.
     pub zigzag_amplitude: f64,
+    /// Largest shift of a doorway along its wall from the middle of its room (m), drawn for
+    /// each doorway from the world's seed; the doorway stays inside its room. Default 0: every
+    /// doorway in the middle, one layout whatever the seed.
+    pub door_offset: f64,
+    /// Chance that a doorway is closed, its wall running on unbroken, drawn for each doorway
+    /// from the world's seed (0 to 1). Default 0.
+    pub closed_doors: f64,
+    /// Most pieces of furniture in a room: each room holds 0 to this many boxes, 0.4-1.6 m
+    /// along the corridor by 0.4-0.8 m, placed in it at random from the world's seed (at most
+    /// [`MAX_FURNITURE`](super::MAX_FURNITURE)). Default 0.
+    pub furniture: usize,
 }
 
 impl Default for CorridorConfig {
@@ -140,6 +151,9 @@ impl Default for CorridorConfig {
             wall_thickness: 0.1,
             zigzag_period: 3.0,
             zigzag_amplitude: 0.5,
+            door_offset: 0.0,
+            closed_doors: 0.0,
+            furniture: 0,
         }
     }
 }
