@@ -214,7 +214,10 @@ fn a_drift_on_old_ground_is_not_spread_over_the_matches_the_old_map_vouched_for(
 /// correction bent 14 records and the map they laid: 0.0467 m, 65 relations above 0.5 m,
 /// against 0.0315 m as a jump. A match the old map does not pin vouches for nothing. The
 /// case was found with every relevant scan entering the map (`min_novelty = 0`, q-wsm's
-/// default then), and is kept so.
+/// default then) and before matches held odometry along a corridor they do not pin
+/// (`hold_unobserved`), and is kept so. (With the hold this configuration scores 0.166 m:
+/// with returns beyond 10 m dropped many corridor matches are held from record 1 on, and
+/// Intel's odometry reads about 5 % long there; see Known limits.)
 #[test]
 fn a_match_the_old_map_does_not_pin_along_a_corridor_does_not_start_a_spread() {
     let log = read_carmen(&data("intel.clf.bz2"), &CarmenOptions::default()).expect("Intel log");
@@ -229,6 +232,7 @@ fn a_match_the_old_map_does_not_pin_along_a_corridor_does_not_start_a_spread() {
         .collect();
     let mut config = MatcherConfig::defaults(MatcherKind::QWsm);
     config.relevance.min_novelty = Some(0.0);
+    config.motion.hold_unobserved = false;
     let run = run_matcher(&records, &config, false).expect("run");
     let report = evaluate_relations(&run.trajectory, &relations, 0.1).expect("relations");
     println!("{report:?}");

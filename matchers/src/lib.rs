@@ -40,6 +40,7 @@
 pub mod calibration;
 pub mod config;
 pub mod correlative;
+pub mod degeneracy;
 pub mod icp;
 pub mod idc;
 pub mod lsq;

@@ -216,6 +216,9 @@ pub struct Check {
     pub withheld: bool,
     /// The match was re-anchored to the old map on a revisit ([`crate::revisit`]).
     pub reanchored: bool,
+    /// The match kept odometry's estimate along the direction the scan does not fix
+    /// ([`crate::MotionModel::hold_unobserved`]).
+    pub held: bool,
 }
 
 impl Check {
@@ -227,6 +230,7 @@ impl Check {
         refused: false,
         withheld: false,
         reanchored: false,
+        held: false,
     };
 }
 

@@ -79,6 +79,8 @@ fn config(kind: MatcherKind, checked: bool, faces: bool) -> MatcherConfig {
         .expect("a valid config")
     };
     c.validation.enabled = checked;
+    // The paper's plain form holds nothing either (README, Configuration).
+    c.motion.hold_unobserved &= checked;
     c
 }
 
@@ -299,7 +301,11 @@ fn a_slide_odometry_never_made_does_not_enter_the_map() {
             veto_falls_back: falls_back,
             ..ValidationParams::default()
         };
-        let mut pipeline = sabotaged_with(12, slid, gate);
+        // The hold would keep odometry along the axis before the veto saw the slide (below).
+        let mut pipeline = sabotaged_with(12, slid, gate).with_motion_model(MotionModel {
+            hold_unobserved: false,
+            ..MotionModel::default()
+        });
         (0..20)
             .map(|k| {
                 let before = pipeline.reference().len();
@@ -337,6 +343,16 @@ fn a_slide_odometry_never_made_does_not_enter_the_map() {
     // With the gate off the slide enters the map.
     let (e, added) = run(0.0, true).swap_remove(11);
     assert!(!e.check.withheld && e.inserted && added > 0, "{e:?}");
+    // With the hold (the default) the slide along the featureless axis never happens: the
+    // match keeps odometry's x, and enters the map as a right match.
+    let mut pipeline = sabotaged_with(12, slid, ValidationParams::default());
+    for k in 0..12 {
+        let e = pipeline.process(&record_in(&corridor, k, truth(k)));
+        if k == 11 {
+            assert!(e.check.held && !e.check.withheld && e.inserted, "{e:?}");
+            assert!((e.pose.x - truth(k).x).abs() < 0.01, "{e:?}");
+        }
+    }
 }
 
 #[test]

@@ -79,6 +79,9 @@ pub struct MatchSummary {
     pub withheld: usize,
     /// Matches re-anchored to the old map on a revisit.
     pub reanchored: usize,
+    /// Matches that kept odometry's estimate along the direction the scan does not fix
+    /// (`[matcher.motion] hold_unobserved`).
+    pub held: usize,
 }
 
 impl MatchSummary {
@@ -159,6 +162,7 @@ struct RunTotals {
     refused: usize,
     withheld: usize,
     reanchored: usize,
+    held: usize,
 }
 
 impl RunTotals {
@@ -191,6 +195,7 @@ impl RunTotals {
         self.refused += usize::from(r.check.refused);
         self.withheld += usize::from(r.check.withheld);
         self.reanchored += usize::from(r.check.reanchored);
+        self.held += usize::from(r.check.held);
     }
 
     fn summary(&self, matcher: &str, busy: std::time::Duration, map_points: usize) -> MatchSummary {
@@ -213,6 +218,7 @@ impl RunTotals {
             refused: self.refused,
             withheld: self.withheld,
             reanchored: self.reanchored,
+            held: self.held,
         }
     }
 }
