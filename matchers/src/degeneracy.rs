@@ -55,7 +55,7 @@ pub struct WeakDirection {
 /// with a reference point within `reach` (the smallest eigenvector of Σ n nᵀ over their
 /// normals), and the information along it of the points that tell it (see the module's doc),
 /// with the variance of the points' distances to their surfaces, never below the laser's
-/// range variance. `None` with fewer than three points paired.
+/// range variance. `None` with fewer than three paired points whose surface has a normal.
 #[must_use]
 pub fn weak_direction<I: SpatialIndex>(
     reference: &Reference<I>,
@@ -84,7 +84,14 @@ pub fn weak_direction<I: SpatialIndex>(
         }
         normals.push((normal, linearity));
     }
-    if normals.len() < 3 {
+    // Without three surfaces of known direction there is no direction to judge (lone
+    // points alone: a far post, a sparse fringe), and nothing is held.
+    if normals
+        .iter()
+        .filter(|(n, _)| *n != Vector2::zeros())
+        .count()
+        < 3
+    {
         return None;
     }
     let floor = reference.noise().sigma_range.powi(2).max(1e-8);
