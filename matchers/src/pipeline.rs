@@ -580,8 +580,6 @@ pub struct Pipeline<M, I> {
     /// until one does, the log has no odometry ([`MotionModel::stall_prior_sigmas`]).
     first_reading: Option<Pose2>,
     odometry_moved: bool,
-    /// Whether the last [`Pipeline::match_from`] held a direction at its start.
-    held_last: bool,
 }
 
 impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
@@ -619,7 +617,6 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             held: None,
             first_reading: None,
             odometry_moved: false,
-            held_last: false,
             calibration: OdometryCalibration::default(),
         }
         .with_motion_model(MotionModel::default())
@@ -689,12 +686,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             .then(|| self.search.search(&self.reference, local, &guess))
             .flatten()
             .map(|start| self.match_from(scan, start.pose, prior, held))
-            .filter(|m| m.fallback.is_none());
-        let mut result = match started {
+            .filter(|(m, _)| m.fallback.is_none());
+        let (mut result, mut was_held) = match started {
             Some(m) => m,
             None => self.match_from(scan, guess, prior, held),
         };
-        let mut was_held = self.held_last;
         if !self.validator.params.enabled {
             let check = Check {
                 held: was_held,
@@ -717,7 +713,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         if self.validator.params.search && is_poor(fit, level) {
             check.searched = true;
             if let Some(start) = self.search.search(&self.reference, local, &guess) {
-                let again = self.match_from(scan, start.pose, prior, held);
+                let (again, again_held) = self.match_from(scan, start.pose, prior, held);
                 if again.fallback.is_none() {
                     let f = self.fit(local, &again);
                     // Only a match that passes the check replaces the first: one poor
@@ -726,7 +722,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                         result = again;
                         fit = f;
                         check.recovered = true;
-                        was_held = self.held_last;
+                        was_held = again_held;
                     }
                 }
             }
@@ -760,18 +756,18 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
 
     /// The matcher's match of `scan` from `start` under `prior` (centred there), holding
     /// `start` in the direction the scan does not fix where `held` gives odometry's prior
-    /// ([`MotionModel::hold_unobserved`]).
+    /// ([`MotionModel::hold_unobserved`]), and whether it held.
     fn match_from(
         &mut self,
         scan: &qicp_core::Scan,
         start: Pose2,
         prior: Option<Matrix3<f64>>,
         held: Option<Matrix3<f64>>,
-    ) -> MatchResult {
+    ) -> (MatchResult, bool) {
         let mut m = self
             .matcher
             .match_with_prior(&self.reference, scan, start, prior);
-        self.held_last = false;
+        let mut was_held = false;
         if m.fallback.is_none()
             && let Some(lambda) = held
             && let Some(weak) = crate::degeneracy::weak_direction(
@@ -781,9 +777,9 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                 self.validator.params.inlier_distance,
             )
         {
-            self.held_last = crate::degeneracy::hold_unobserved(&mut m, &start, &lambda, &weak);
+            was_held = crate::degeneracy::hold_unobserved(&mut m, &start, &lambda, &weak);
         }
-        m
+        (m, was_held)
     }
 
     /// The share of the scan `local` at `pose` the reference explains, of the points it could
