@@ -32,8 +32,9 @@
 //! direction, and every match that knows more than the prior along its weakest direction,
 //! is left exactly as it was.
 
+use crate::validation::Placed;
 use nalgebra::{Matrix2, Vector2};
-use qicp_core::{MatchResult, Matrix3, Point2, Pose2, Reference, SpatialIndex};
+use qicp_core::{MatchResult, Matrix3, Pose2, Reference, SpatialIndex};
 
 /// A surface tells the motion along a direction when its normal lies within this of it
 /// (cos 60°).
@@ -51,31 +52,29 @@ pub struct WeakDirection {
     pub information: f64,
 }
 
-/// The direction of translation the scan `local` at `pose` constrains least, from its points
-/// with a reference point within `reach` (the smallest eigenvector of Σ n nᵀ over their
-/// normals), and the information along it of the points that tell it (see the module's doc),
-/// with the variance of the points' distances to their surfaces, never below the laser's
-/// range variance. `None` with fewer than three paired points whose surface has a normal.
+/// The direction of translation the scan `placed` constrains least, from its points with a
+/// reference point within `reach` (the smallest eigenvector of Σ n nᵀ over their normals),
+/// and the information along it of the points that tell it (see the module's doc), with the
+/// variance of the points' distances to their surfaces, never below the laser's range
+/// variance. `None` with fewer than three paired points whose surface has a normal. Reads
+/// the look-ups `placed` made, so a reach beyond its own counts no more than its own.
 #[must_use]
 pub fn weak_direction<I: SpatialIndex>(
     reference: &Reference<I>,
-    local: &[Point2<f64>],
-    pose: &Pose2,
+    placed: &Placed,
     reach: f64,
 ) -> Option<WeakDirection> {
-    let refs = reference.index().points();
     let info = reference.info();
-    let mut normals = Vec::with_capacity(local.len());
+    let mut normals = Vec::with_capacity(placed.points.len());
     let mut sum_sq = 0.0;
     let mut spread = Matrix2::zeros();
-    for b in local {
-        let p = pose.transform_point(b);
-        let Some(n) = reference.index().nearest_within(&p, reach * reach) else {
+    for (p, nearest) in &placed.points {
+        let Some(n) = nearest.filter(|n| n.dist_sq <= reach * reach) else {
             continue;
         };
         let normal = info[n.id as usize].normal;
         let linearity = info[n.id as usize].linearity;
-        let d = refs[n.id as usize] - p;
+        let d = n.point - p;
         if normal == Vector2::zeros() {
             sum_sq += d.norm_squared() / 2.0;
         } else {

@@ -65,5 +65,5 @@ pub use pipeline::{Estimate, MotionModel, Odometry, Pipeline, Policy, Relevance}
 pub use policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 pub use registry::{Algorithm, AnyIndex, IndexEntry, Metric, ReferenceEntry, Registry};
 pub use revisit::{Proposal, Revisit, RevisitParams, Vouch};
-pub use validation::{Check, FieldOfView, Fit, Level, ValidationParams, Validator};
+pub use validation::{Check, FieldOfView, Fit, Level, Placed, ValidationParams, Validator};
 pub use wsm::{Wsm, WsmAlgorithm, WsmParams};

@@ -8,7 +8,7 @@ use crate::icp::non_negative;
 use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 use crate::revisit::{Revisit, RevisitParams};
 use crate::trail::{Amendment, Trail, moves_fit};
-use crate::validation::{Check, FieldOfView, Fit, ValidationParams, Validator, is_poor};
+use crate::validation::{Check, FieldOfView, Fit, Placed, ValidationParams, Validator, is_poor};
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
     ScanMatcher, SpatialIndex,
@@ -686,8 +686,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             .then(|| self.search.search(&self.reference, local, &guess))
             .flatten()
             .map(|start| self.match_from(scan, start.pose, prior, held))
-            .filter(|(m, _)| m.fallback.is_none());
-        let (mut result, mut was_held) = match started {
+            .filter(|(m, ..)| m.fallback.is_none());
+        let (mut result, mut was_held, placed) = match started {
             Some(m) => m,
             None => self.match_from(scan, guess, prior, held),
         };
@@ -700,7 +700,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         }
         let level = self.validator.threshold();
         let mut fit = match result.fallback {
-            None => self.fit(local, &result),
+            None => self.fit(local, &result, placed.as_ref()),
             // Nothing within the gate: odometry may be far off, or the scan sees new ground.
             Some(Fallback::TooFewCorrespondences { found }) => Fit {
                 share: 0.0,
@@ -713,9 +713,10 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         if self.validator.params.search && is_poor(fit, level) {
             check.searched = true;
             if let Some(start) = self.search.search(&self.reference, local, &guess) {
-                let (again, again_held) = self.match_from(scan, start.pose, prior, held);
+                let (again, again_held, again_placed) =
+                    self.match_from(scan, start.pose, prior, held);
                 if again.fallback.is_none() {
-                    let f = self.fit(local, &again);
+                    let f = self.fit(local, &again, again_placed.as_ref());
                     // Only a match that passes the check replaces the first: one poor
                     // match is not traded for another (an aliased corridor, a lone scan).
                     if f.share > fit.share && !is_poor(f, level) {
@@ -746,7 +747,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     (1.0 - self.validator.params.max_share_drop) * predicted > fit.share
                 }
             };
-            if (check.refused || restarting) && astray(self.share(local, &guess)) {
+            if (check.refused || restarting) && astray(self.share(local, &guess, None)) {
                 result = MatchResult::fallback(guess, Fallback::Refused);
             }
         }
@@ -756,45 +757,62 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
 
     /// The matcher's match of `scan` from `start` under `prior` (centred there), holding
     /// `start` in the direction the scan does not fix where `held` gives odometry's prior
-    /// ([`MotionModel::hold_unobserved`]), and whether it held.
+    /// ([`MotionModel::hold_unobserved`]), and whether it held. The scan placed at the match,
+    /// paired with the reference within the check's reach, comes with it where the hold
+    /// judged the match and left its pose as it was: the check reads the same look-ups.
     fn match_from(
         &mut self,
         scan: &qicp_core::Scan,
         start: Pose2,
         prior: Option<Matrix3<f64>>,
         held: Option<Matrix3<f64>>,
-    ) -> (MatchResult, bool) {
+    ) -> (MatchResult, bool, Option<Placed>) {
         let mut m = self
             .matcher
             .match_with_prior(&self.reference, scan, start, prior);
-        let mut was_held = false;
-        if m.fallback.is_none()
-            && let Some(lambda) = held
-            && let Some(weak) = crate::degeneracy::weak_direction(
-                &self.reference,
-                scan.points(),
-                &m.pose,
-                self.validator.params.inlier_distance,
-            )
-        {
-            was_held = crate::degeneracy::hold_unobserved(&mut m, &start, &lambda, &weak);
+        let (Some(lambda), None) = (held, m.fallback) else {
+            return (m, false, None);
+        };
+        let placed = Placed::new(
+            &self.reference,
+            scan.points(),
+            &m.pose,
+            self.validator.reach(),
+        );
+        let weak = crate::degeneracy::weak_direction(
+            &self.reference,
+            &placed,
+            self.validator.params.inlier_distance,
+        );
+        match weak {
+            Some(weak) if crate::degeneracy::hold_unobserved(&mut m, &start, &lambda, &weak) => {
+                (m, true, None)
+            }
+            _ => (m, false, Some(placed)),
         }
-        (m, was_held)
     }
 
     /// The share of the scan `local` at `pose` the reference explains, of the points it could
-    /// have seen ([`ValidationParams::skip_unseen`]).
-    fn share(&self, local: &[Point2<f64>], pose: &Pose2) -> f64 {
+    /// have seen ([`ValidationParams::skip_unseen`]); from `placed`'s look-ups where it was
+    /// placed at `pose`.
+    fn share(&self, local: &[Point2<f64>], pose: &Pose2, placed: Option<&Placed>) -> f64 {
         let view = self.view.filter(|_| self.validator.params.skip_unseen);
-        self.validator
-            .seen_share(&self.reference, local, pose, view.as_ref())
+        match placed.filter(|p| p.pose == *pose) {
+            Some(placed) => self
+                .validator
+                .placed_share(&self.reference, placed, view.as_ref()),
+            None => self
+                .validator
+                .seen_share(&self.reference, local, pose, view.as_ref()),
+        }
     }
 
     /// What the check weighs of a match of the scan `local`: the share of it the reference
-    /// explains, the residual and the pairs.
-    fn fit(&self, local: &[Point2<f64>], r: &MatchResult) -> Fit {
+    /// explains, the residual and the pairs; from `placed`'s look-ups where it holds the
+    /// match's ([`Pipeline::share`]).
+    fn fit(&self, local: &[Point2<f64>], r: &MatchResult, placed: Option<&Placed>) -> Fit {
         Fit {
-            share: self.share(local, &r.pose),
+            share: self.share(local, &r.pose, placed),
             residual: r.residual,
             pairs: r.correspondences as f64,
         }
@@ -822,7 +840,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         // residual, fits the old map on a part of the scan only, where a stretch of it looks
         // alike (aliasing). And it must be pinned to within the tolerance the look-ups'
         // corrections are compared with: a few trunks fit the old map in many places.
-        if is_poor(self.fit(local, &again), self.validator.threshold())
+        if is_poor(self.fit(local, &again, None), self.validator.threshold())
             || !Revisit::well_determined(&again)
         {
             return false;
@@ -1031,7 +1049,8 @@ where
             && let Some(lambda) = prior
         {
             let local = record.scan.points();
-            let gained = || (check.inlier_share - self.share(local, &guess)) * local.len() as f64;
+            let gained =
+                || (check.inlier_share - self.share(local, &guess, None)) * local.len() as f64;
             if self
                 .validator
                 .outweighs_odometry(gained, &lambda, &guess, &result.pose)

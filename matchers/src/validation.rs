@@ -28,7 +28,7 @@
 
 use crate::ConfigError;
 use crate::icp::positive;
-use qicp_core::{Matrix3, Point2, Pose2, Reference, Scan, SpatialIndex, Vector3};
+use qicp_core::{Matrix3, Neighbour, Point2, Pose2, Reference, Scan, SpatialIndex, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -246,6 +246,60 @@ pub struct Validator {
     restarted: bool,
 }
 
+/// A scan placed at a pose, each point paired with the reference's nearest point within a
+/// reach: the look-ups the check's share ([`Validator::placed_share`]) and the hold's weak
+/// direction ([`crate::degeneracy::weak_direction`]) both read, made once per match.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Placed {
+    /// The pose the scan was placed at.
+    pub pose: Pose2,
+    /// How far (m) the look-ups reached.
+    pub reach: f64,
+    /// Each point in the reference frame, with the reference's nearest point within `reach`.
+    pub points: Vec<(Point2<f64>, Option<Neighbour>)>,
+}
+
+impl Placed {
+    /// Places `local` (laser frame) at `pose` and looks up each point's nearest reference
+    /// point within `reach`.
+    #[must_use]
+    pub fn new<I: SpatialIndex>(
+        reference: &Reference<I>,
+        local: &[Point2<f64>],
+        pose: &Pose2,
+        reach: f64,
+    ) -> Self {
+        let index = reference.index();
+        let points = local
+            .iter()
+            .map(|q| {
+                let p = pose.transform_point(q);
+                (p, index.nearest_within(&p, reach * reach))
+            })
+            .collect();
+        Self {
+            pose: *pose,
+            reach,
+            points,
+        }
+    }
+
+    /// The same points looked up again within `reach`.
+    fn again<I: SpatialIndex>(reference: &Reference<I>, placed: &Self, reach: f64) -> Self {
+        let index = reference.index();
+        let points = placed
+            .points
+            .iter()
+            .map(|(p, _)| (*p, index.nearest_within(p, reach * reach)))
+            .collect();
+        Self {
+            pose: placed.pose,
+            reach,
+            points,
+        }
+    }
+}
+
 /// The field of view of the last scan that entered a reference: its laser pose in the
 /// reference frame and the bearings its beams spanned (half a beam step beyond the first and
 /// the last).
@@ -391,25 +445,47 @@ impl Validator {
         pose: &Pose2,
         view: Option<&FieldOfView>,
     ) -> f64 {
-        if local.is_empty() {
-            return 0.0;
+        let placed = Placed::new(reference, local, pose, self.reach());
+        self.placed_share(reference, &placed, view)
+    }
+
+    /// How far from a point the check looks for the reference: twice `inlier_distance`.
+    #[must_use]
+    pub fn reach(&self) -> f64 {
+        2.0 * self.params.inlier_distance
+    }
+
+    /// [`Validator::seen_share`] of a scan already placed and paired with the reference, the
+    /// look-ups made once for the check and the hold. A placement made within less than
+    /// [`Validator::reach`] is looked up again.
+    #[must_use]
+    pub fn placed_share<I: SpatialIndex>(
+        &self,
+        reference: &Reference<I>,
+        placed: &Placed,
+        view: Option<&FieldOfView>,
+    ) -> f64 {
+        let reach = self.reach();
+        if placed.reach < reach {
+            let again = Placed::again(reference, placed, reach);
+            return self.placed_share(reference, &again, view);
         }
         let d = self.params.inlier_distance;
-        let reach = 2.0 * d;
         let (mut explained, mut seen) = (0usize, 0usize);
-        for q in local {
-            let p = pose.transform_point(q);
-            let surface = reference.surface_distance_sq(&p, reach * reach);
+        for (p, nearest) in &placed.points {
+            let surface = nearest
+                .filter(|n| n.dist_sq <= reach * reach)
+                .map(|n| (reference.surface_foot(n.id, p) - p).norm_squared());
             // With no reference point within the reach a point is unexplained; outside the
             // view it was also unseen.
-            if surface.is_none() && view.is_some_and(|v| !v.contains(&p)) {
+            if surface.is_none() && view.is_some_and(|v| !v.contains(p)) {
                 continue;
             }
             seen += 1;
             explained += usize::from(surface.is_some_and(|e_sq| e_sq.sqrt() <= d));
         }
-        // Where no point could have been seen, none is explained: the share is 0, as counted
-        // over every point.
+        // Where no point could have been seen (or the scan is empty), none is explained: the
+        // share is 0, as counted over every point.
         if seen == 0 {
             return 0.0;
         }

@@ -7,9 +7,10 @@ use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, MutualNearest, Point2, Pose2,
     QuadTree, Record, Reference, Scan, ScanMatcher, SpatialIndex,
 };
+use qicp_matchers::degeneracy::weak_direction;
 use qicp_matchers::{
     CorrelativeParams, FieldOfView, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind,
-    MotionModel, Odometry, Pipeline, Policy, Relevance, ValidationParams, Validator, Wsm,
+    MotionModel, Odometry, Pipeline, Placed, Policy, Relevance, ValidationParams, Validator, Wsm,
     WsmParams,
 };
 
@@ -1294,6 +1295,75 @@ fn new_ground_outside_what_the_map_saw_does_not_lower_the_share() {
         let share = validator.seen_share(&reference, local, &wrong, Some(&view));
         assert!(share < 0.6, "{wrong:?}: {share:.2}");
     }
+}
+
+/// The share the check computes from a placement, looked up once for the check and the hold,
+/// against its brute-force twin: every point's surface distance looked up on its own.
+#[test]
+fn a_placement_gives_the_share_and_weak_direction_of_its_own_look_ups_at_any_reach() {
+    let world = SyntheticWorld::corridor();
+    let mut reference = Reference::new(QuadTree::default());
+    for k in 0..4 {
+        let pose = backing(20 + 3 * k);
+        let scan = world.scan(&pose, 0.005, k as u64);
+        reference
+            .insert_scan(&scan, &pose, Some(Merge::spacing(0.01)))
+            .expect("finite");
+    }
+    let validator = Validator::new(ValidationParams::default());
+    let d = validator.params.inlier_distance;
+    let mut rng = SplitMix::new(62);
+    let (mut judged, mut shares) = (0, Vec::new());
+    for trial in 0..40 {
+        let truth = backing(20 + (trial % 12));
+        let pose = truth
+            * Pose2::new(
+                rng.range(-0.15, 0.15),
+                rng.range(-0.15, 0.15),
+                rng.range(-0.1, 0.1),
+            );
+        let scan = world.scan(&truth, 0.005, 100 + trial as u64);
+        let local = scan.points();
+        let view = FieldOfView::of(&scan, backing(20));
+        for view in [None, Some(&view)] {
+            let (mut explained, mut seen) = (0usize, 0usize);
+            for q in local {
+                let p = pose.transform_point(q);
+                let surface = reference.surface_distance_sq(&p, 4.0 * d * d);
+                if surface.is_none() && view.is_some_and(|v| !v.contains(&p)) {
+                    continue;
+                }
+                seen += 1;
+                explained += usize::from(surface.is_some_and(|e| e.sqrt() <= d));
+            }
+            let twin = if seen == 0 {
+                0.0
+            } else {
+                explained as f64 / seen as f64
+            };
+            assert_eq!(validator.seen_share(&reference, local, &pose, view), twin);
+            shares.push(twin);
+            for reach in [0.5 * d, 2.0 * d, 10.0 * d] {
+                let placed = Placed::new(&reference, local, &pose, reach);
+                let share = validator.placed_share(&reference, &placed, view);
+                assert_eq!(share, twin, "trial {trial}, reach {reach}");
+            }
+        }
+        // The hold reads the look-ups within the inlier distance, whatever the placement's
+        // reach beyond it.
+        let own = Placed::new(&reference, local, &pose, d);
+        let wide = Placed::new(&reference, local, &pose, 2.0 * d);
+        let weak = weak_direction(&reference, &own, d);
+        assert_eq!(weak, weak_direction(&reference, &wide, d), "trial {trial}");
+        judged += usize::from(weak.is_some());
+    }
+    // The poses tried range from a match to a poor one, and most are judged.
+    shares.sort_by(f64::total_cmp);
+    assert!(
+        shares[0] < 0.5 && shares[shares.len() - 1] > 0.9,
+        "{shares:?}"
+    );
+    assert!(judged > 20, "{judged} of 40 judged");
 }
 
 /// Drives `backing` for `scans` scans with odometry read true, the checks at a level
