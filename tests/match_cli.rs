@@ -86,7 +86,7 @@ fn match_writes_every_output() {
     assert_eq!(
         csv.lines().next(),
         Some(
-            "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm,inlier_share,check"
+            "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm,inlier_share,check,held"
         )
     );
     assert_eq!(csv.lines().count(), 61);
@@ -109,6 +109,13 @@ fn match_writes_every_output() {
         matched += 1;
     }
     assert_eq!(matched, 59);
+    // Each held match is marked where summary.json counts them.
+    let held = csv
+        .lines()
+        .skip(1)
+        .filter(|row| row.ends_with(",1"))
+        .count();
+    assert_eq!(summary["held"], held, "{summary}");
     // The effective config is complete and loads again.
     let config = text(&out.join("config.toml"));
     assert!(config.contains("[matcher.wsm]") && config.contains("[matcher.relevance]"));

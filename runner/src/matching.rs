@@ -417,7 +417,7 @@ fn write_rows_header<W: Write>(w: &mut W) -> std::io::Result<()> {
     writeln!(
         w,
         "timestamp,iterations,correspondences,residual_mm,certainty,ms,inserted,fallback,sigma_mm,\
-         inlier_share,check"
+         inlier_share,check,held"
     )
 }
 
@@ -425,7 +425,7 @@ fn write_rows_header<W: Write>(w: &mut W) -> std::io::Result<()> {
 fn write_row<W: Write>(w: &mut W, r: &ScanRow) -> std::io::Result<()> {
     writeln!(
         w,
-        "{},{},{},{:.4},{:.6e},{:.4},{},{},{:.4},{:.4},{}",
+        "{},{},{},{:.4},{:.6e},{:.4},{},{},{:.4},{:.4},{},{}",
         r.timestamp,
         r.iterations,
         r.correspondences,
@@ -437,6 +437,7 @@ fn write_row<W: Write>(w: &mut W, r: &ScanRow) -> std::io::Result<()> {
         r.sigma_mm,
         r.check.inlier_share,
         check_label(&r.check),
+        u8::from(r.check.held),
     )
 }
 
