@@ -65,36 +65,34 @@ pub fn weak_direction<I: SpatialIndex>(
     reach: f64,
 ) -> Option<WeakDirection> {
     let info = reference.info();
-    let mut normals = Vec::with_capacity(placed.points.len());
+    // The pairs within reach, each with its reference point's surface.
+    let paired = || {
+        placed.points.iter().filter_map(move |(p, nearest)| {
+            let n = nearest.filter(|n| n.dist_sq <= reach * reach)?;
+            let at = &info[n.id as usize];
+            Some((n.point - p, at.normal, at.linearity))
+        })
+    };
+    let (mut pairs, mut with_normal) = (0usize, 0usize);
     let mut sum_sq = 0.0;
     let mut spread = Matrix2::zeros();
-    for (p, nearest) in &placed.points {
-        let Some(n) = nearest.filter(|n| n.dist_sq <= reach * reach) else {
-            continue;
-        };
-        let normal = info[n.id as usize].normal;
-        let linearity = info[n.id as usize].linearity;
-        let d = n.point - p;
+    for (d, normal, _) in paired() {
+        pairs += 1;
         if normal == Vector2::zeros() {
             sum_sq += d.norm_squared() / 2.0;
         } else {
+            with_normal += 1;
             sum_sq += normal.dot(&d).powi(2);
             spread += normal * normal.transpose();
         }
-        normals.push((normal, linearity));
     }
     // Without three surfaces of known direction there is no direction to judge (lone
     // points alone: a far post, a sparse fringe), and nothing is held.
-    if normals
-        .iter()
-        .filter(|(n, _)| *n != Vector2::zeros())
-        .count()
-        < 3
-    {
+    if with_normal < 3 {
         return None;
     }
     let floor = reference.noise().sigma_range.powi(2).max(1e-8);
-    let sigma2 = (sum_sq / (normals.len() as f64 - 3.0).max(1.0)).max(floor);
+    let sigma2 = (sum_sq / (pairs as f64 - 3.0).max(1.0)).max(floor);
     let eigen = spread.symmetric_eigen();
     let weakest = if eigen.eigenvalues[0] <= eigen.eigenvalues[1] {
         0
@@ -105,10 +103,10 @@ pub fn weak_direction<I: SpatialIndex>(
     // What each point tells along u, as a share of a point facing it head-on; a point
     // telling less than a straight surface at 60° does is noise (a far, sparse wall's fit).
     let (mut facing, mut count) = (0.0, 0);
-    for (n, l) in &normals {
+    for (_, n, l) in paired() {
         // A point without a normal is a sample of a surface of unknown direction: in a map
         // most are a far wall's sparse samples at a grazing angle, not posts.
-        if *n == Vector2::zeros() {
+        if n == Vector2::zeros() {
             continue;
         }
         let c = n.dot(&u).abs();
