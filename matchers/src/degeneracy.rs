@@ -125,9 +125,9 @@ pub fn weak_direction<I: SpatialIndex>(
     })
 }
 
-/// Keeps `start`'s estimate (the centre of the prior `prior`) along the weak direction where
-/// the scan knows less there than the prior, and the match's in every other direction; the
-/// covariance takes the prior's variance along it. Returns whether it held (the result is
+/// Keeps `start`'s estimate (the prediction, whose uncertainty is `prior`) along the weak
+/// direction where the scan knows less there than the prior, and the match's in every other
+/// direction; the covariance takes the prior's variance along it. Returns whether it held (the result is
 /// untouched otherwise).
 pub fn hold_unobserved(
     result: &mut MatchResult,

@@ -677,7 +677,12 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         prior: Option<Matrix3<f64>>,
         (correlative_start, by_odometry): (bool, bool),
     ) -> (MatchResult, Check, bool) {
-        let held = prior.filter(|_| by_odometry && self.motion.hold_unobserved);
+        // The hold keeps the prediction along what the scan does not fix, whatever start the
+        // match came from: a re-match from the search's best pose along a featureless
+        // corridor starts wherever the search's scores tied.
+        let held = prior
+            .filter(|_| by_odometry && self.motion.hold_unobserved)
+            .map(|lambda| (lambda, guess));
         let local = scan.points();
         // Without odometry, ICP starts from the search's best pose around the prediction
         // ([`CorrelativeParams::start_without_odometry`]), and from the prediction only where
@@ -756,8 +761,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     }
 
     /// The matcher's match of `scan` from `start` under `prior` (centred there), holding
-    /// `start` in the direction the scan does not fix where `held` gives odometry's prior
-    /// ([`MotionModel::hold_unobserved`]), and whether it held. The scan placed at the match,
+    /// the prediction in the direction the scan does not fix where `held` gives odometry's
+    /// prior and the prediction ([`MotionModel::hold_unobserved`]), and whether it held. The scan placed at the match,
     /// paired with the reference within the check's reach, comes with it where the hold
     /// judged the match and left its pose as it was: the check reads the same look-ups.
     fn match_from(
@@ -765,12 +770,12 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         scan: &qicp_core::Scan,
         start: Pose2,
         prior: Option<Matrix3<f64>>,
-        held: Option<Matrix3<f64>>,
+        held: Option<(Matrix3<f64>, Pose2)>,
     ) -> (MatchResult, bool, Option<Placed>) {
         let mut m = self
             .matcher
             .match_with_prior(&self.reference, scan, start, prior);
-        let (Some(lambda), None) = (held, m.fallback) else {
+        let (Some((lambda, predicted)), None) = (held, m.fallback) else {
             return (m, false, None);
         };
         let placed = Placed::new(
@@ -785,7 +790,9 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             self.validator.params.inlier_distance,
         );
         match weak {
-            Some(weak) if crate::degeneracy::hold_unobserved(&mut m, &start, &lambda, &weak) => {
+            Some(weak)
+                if crate::degeneracy::hold_unobserved(&mut m, &predicted, &lambda, &weak) =>
+            {
                 (m, true, None)
             }
             _ => (m, false, Some(placed)),
