@@ -127,8 +127,8 @@ pub fn weak_direction<I: SpatialIndex>(
 
 /// Keeps `start`'s estimate (the prediction, whose uncertainty is `prior`) along the weak
 /// direction where the scan knows less there than the prior, and the match's in every other
-/// direction; the covariance takes the prior's variance along it. Returns whether it held (the result is
-/// untouched otherwise).
+/// direction; the covariance takes the prior's variance along it. Returns whether it held
+/// (the result is untouched otherwise).
 pub fn hold_unobserved(
     result: &mut MatchResult,
     start: &Pose2,

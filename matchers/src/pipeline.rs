@@ -762,9 +762,10 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
 
     /// The matcher's match of `scan` from `start` under `prior` (centred there), holding
     /// the prediction in the direction the scan does not fix where `held` gives odometry's
-    /// prior and the prediction ([`MotionModel::hold_unobserved`]), and whether it held. The scan placed at the match,
-    /// paired with the reference within the check's reach, comes with it where the hold
-    /// judged the match and left its pose as it was: the check reads the same look-ups.
+    /// prior and the prediction ([`MotionModel::hold_unobserved`]), and whether it held. The
+    /// scan placed at the match, paired with the reference within the check's reach, comes
+    /// with it where the hold judged the match and left its pose as it was: the check reads
+    /// the same look-ups.
     fn match_from(
         &mut self,
         scan: &qicp_core::Scan,
