@@ -125,13 +125,13 @@ pub fn weak_direction<I: SpatialIndex>(
     })
 }
 
-/// Keeps `start`'s estimate (the prediction, whose uncertainty is `prior`) along the weak
-/// direction where the scan knows less there than the prior, and the match's in every other
-/// direction; the covariance takes the prior's variance along it. Returns whether it held
-/// (the result is untouched otherwise).
+/// Keeps the prediction `predicted` along the weak direction where the scan knows less
+/// there than the prior (`prior`, its information matrix, 1/m² and 1/rad²), and the match's
+/// estimate in every other direction; the covariance takes the prior's variance along it.
+/// Returns whether it held (the result is untouched otherwise).
 pub fn hold_unobserved(
     result: &mut MatchResult,
-    start: &Pose2,
+    predicted: &Pose2,
     prior: &Matrix3<f64>,
     weak: &WeakDirection,
 ) -> bool {
@@ -141,7 +141,7 @@ pub fn hold_unobserved(
     if weak.information.partial_cmp(&along) != Some(std::cmp::Ordering::Less) {
         return false;
     }
-    let slid = (result.pose.translation() - start.translation()).dot(&u);
+    let slid = (result.pose.translation() - predicted.translation()).dot(&u);
     let t = result.pose.translation() - u * slid;
     result.pose = Pose2::new(t.x, t.y, result.pose.theta);
     // d' = A d with A = I − u uᵀ on x and y; the prior's variance along u.

@@ -269,31 +269,24 @@ impl Placed {
         pose: &Pose2,
         reach: f64,
     ) -> Self {
-        let index = reference.index();
-        let points = local
-            .iter()
-            .map(|q| {
-                let p = pose.transform_point(q);
-                (p, index.nearest_within(&p, reach * reach))
-            })
-            .collect();
-        Self {
-            pose: *pose,
-            reach,
-            points,
-        }
+        let points = local.iter().map(|q| pose.transform_point(q));
+        Self::look_up(reference, points, *pose, reach)
     }
 
-    /// The same points looked up again within `reach`.
-    fn again<I: SpatialIndex>(reference: &Reference<I>, placed: &Self, reach: f64) -> Self {
+    /// The points (reference frame) of a scan placed at `pose`, each with its nearest
+    /// reference point within `reach`.
+    fn look_up<I: SpatialIndex>(
+        reference: &Reference<I>,
+        points: impl Iterator<Item = Point2<f64>>,
+        pose: Pose2,
+        reach: f64,
+    ) -> Self {
         let index = reference.index();
-        let points = placed
-            .points
-            .iter()
-            .map(|(p, _)| (*p, index.nearest_within(p, reach * reach)))
+        let points = points
+            .map(|p| (p, index.nearest_within(&p, reach * reach)))
             .collect();
         Self {
-            pose: placed.pose,
+            pose,
             reach,
             points,
         }
@@ -467,7 +460,8 @@ impl Validator {
     ) -> f64 {
         let reach = self.reach();
         if placed.reach < reach {
-            let again = Placed::again(reference, placed, reach);
+            let points = placed.points.iter().map(|(p, _)| *p);
+            let again = Placed::look_up(reference, points, placed.pose, reach);
             return self.placed_share(reference, &again, view);
         }
         let d = self.params.inlier_distance;
