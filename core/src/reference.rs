@@ -60,6 +60,12 @@ pub struct PointInfo {
     /// range noise). A point on a straight surface may correspond to any point along it; a
     /// point on a trunk or a corner may not.
     pub linearity: f64,
+    /// Standard deviation of the normal's direction (rad): the fitted line's, σ / √λ, σ the
+    /// points' spread across it (never below the range noise) and λ their scatter along it.
+    /// A window of samples a few millimetres apart turns its normal at random by tens of
+    /// degrees; one spanning metres holds it to a fraction of one. π/2 (no direction known)
+    /// for a point without a normal.
+    pub normal_sigma: f64,
 }
 
 /// Two neighbouring beams' points lie on one surface when they are closer than this…
@@ -157,6 +163,7 @@ pub fn scan_point_info(scan: &Scan, noise: &LaserNoise) -> Vec<PointInfo> {
                     spacing: (range * step).max(1e-4),
                     covariance,
                     linearity: 0.0,
+                    normal_sigma: std::f64::consts::FRAC_PI_2,
                 };
             };
             let window = fit.window;
@@ -168,6 +175,7 @@ pub fn scan_point_info(scan: &Scan, noise: &LaserNoise) -> Vec<PointInfo> {
                 spacing: spacing.max(1e-4),
                 covariance,
                 linearity: linearity(sxx, sxy, syy, window.len(), noise.sigma_range),
+                normal_sigma: normal_sigma(sxx, sxy, syy, window.len(), noise.sigma_range),
             }
         })
         .collect()
@@ -181,10 +189,35 @@ fn linearity(sxx: f64, sxy: f64, syy: f64, n: usize, sigma: f64) -> f64 {
     if n < 3 || sigma <= 0.0 {
         return 0.0;
     }
-    let half_trace = 0.5 * (sxx + syy);
-    let lambda_min = (half_trace - (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt()).max(0.0);
+    let (lambda_min, _) = principal_scatter(sxx, sxy, syy);
     let spread = (lambda_min / (n - 2) as f64).sqrt();
     (2.0 - 0.5 * spread / sigma).clamp(0.0, 1.0)
+}
+
+/// The fitted line's direction noise ([`PointInfo::normal_sigma`]) for `n` points with
+/// scatter `[[sxx, sxy], [sxy, syy]]` and range noise `sigma`: the spread across the line,
+/// never below `sigma`, over the root of the scatter along it (a regression slope's
+/// deviation), at most π/2.
+fn normal_sigma(sxx: f64, sxy: f64, syy: f64, n: usize, sigma: f64) -> f64 {
+    let (lambda_min, lambda_max) = principal_scatter(sxx, sxy, syy);
+    let across = if n > 2 {
+        (lambda_min / (n - 2) as f64).sqrt().max(sigma)
+    } else {
+        sigma
+    };
+    let s = across / lambda_max.sqrt();
+    if s.is_finite() {
+        s.min(std::f64::consts::FRAC_PI_2)
+    } else {
+        std::f64::consts::FRAC_PI_2
+    }
+}
+
+/// The scatter matrix's eigenvalues (across the principal axis, along it), never negative.
+fn principal_scatter(sxx: f64, sxy: f64, syy: f64) -> (f64, f64) {
+    let half_trace = 0.5 * (sxx + syy);
+    let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+    ((half_trace - root).max(0.0), (half_trace + root).max(0.0))
 }
 
 /// How a scan is merged into a map (see [`Reference::insert_scan`]): the two density bounds.
@@ -508,6 +541,7 @@ impl<I: SpatialIndex> Reference<I> {
                 spacing: seen.spacing,
                 covariance: rot * seen.covariance * rot.transpose(),
                 linearity: seen.linearity,
+                normal_sigma: seen.normal_sigma,
             };
             if let Some(merge) = merge {
                 let resolution = merge.resolution;

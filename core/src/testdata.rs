@@ -207,9 +207,24 @@ impl SyntheticWorld {
     /// noise `sigma` (seeded).
     #[must_use]
     pub fn scan(&self, pose: &crate::Pose2, sigma: f64, seed: u64) -> crate::Scan {
-        let geometry = crate::BeamGeometry::centered(181, std::f64::consts::PI, 30.0);
+        self.scan_with_beams(pose, 181, sigma, seed)
+    }
+
+    /// A 180° scan of `beams` beams (at least 2; max range 30 m) from the laser pose `pose`,
+    /// with Gaussian range noise `sigma` (seeded): a sparser or denser laser than
+    /// [`SyntheticWorld::scan`]'s.
+    #[must_use]
+    pub fn scan_with_beams(
+        &self,
+        pose: &crate::Pose2,
+        beams: usize,
+        sigma: f64,
+        seed: u64,
+    ) -> crate::Scan {
+        let beams = beams.max(2);
+        let geometry = crate::BeamGeometry::centered(beams, std::f64::consts::PI, 30.0);
         let mut r = SplitMix::new(seed);
-        let ranges = (0..181)
+        let ranges = (0..beams)
             .map(|i| {
                 let a = pose.theta + geometry.angle(i);
                 let range = self.cast(pose.x, pose.y, a.cos(), a.sin(), geometry.max_range);
@@ -220,7 +235,7 @@ impl SyntheticWorld {
                 }
             })
             .collect();
-        // The geometry is valid and there are 181 beams: this cannot fail.
+        // The geometry is valid and there are as many ranges as beams: this cannot fail.
         crate::Scan::new(0.0, geometry, ranges).unwrap_or_else(|_| unreachable!())
     }
 }

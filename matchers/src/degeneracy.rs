@@ -20,6 +20,11 @@
 //!   corner's other wall), nothing otherwise: a wall's fitted normals are tilted by a few
 //!   degrees at random, and counted in full that tilt would claim a corridor's length known
 //!   to a centimetre from the 140 points on its side walls;
+//! - a normal is turned towards the direction only by what exceeds three times its
+//!   deviation (σ over the root of its fit's scatter along the surface,
+//!   [`qicp_core::PointInfo::normal_sigma`]): a dense laser (0.5°) samples a wall a metre
+//!   away every 9 mm, and the line through five such samples turns by 20° at random, so
+//!   that wall's noise alone would face every direction;
 //! - a point on a curved surface (linearity 0: a trunk, a corner) counts 1 in every
 //!   direction, and points in between in proportion (l (n·u)² + 1 − l);
 //! - a point that counts less than a straight surface facing the direction at 60° (0.25)
@@ -39,6 +44,12 @@ use qicp_core::{MatchResult, Matrix3, Pose2, Reference, SpatialIndex};
 /// A surface tells the motion along a direction when its normal lies within this of it
 /// (cos 60°).
 const FACING_COS: f64 = 0.5;
+/// A normal counts as turned towards a direction only by what exceeds this many of its
+/// deviations ([`qicp_core::PointInfo::normal_sigma`]), a turn noise gives one normal in a
+/// few hundred: a wall sampled every few millimetres (a dense laser close to it) fits
+/// normals turned by tens of degrees at random, and without this its noise alone would face
+/// any direction.
+const FACING_SIGMAS: f64 = 3.0;
 /// Fewer points than this telling a direction tell nothing along it: one or two normals
 /// turned that far are a noisy fit, not a surface.
 const MIN_FACING: usize = 3;
@@ -70,13 +81,13 @@ pub fn weak_direction<I: SpatialIndex>(
         placed.points.iter().filter_map(move |(p, nearest)| {
             let n = nearest.filter(|n| n.dist_sq <= reach * reach)?;
             let at = &info[n.id as usize];
-            Some((n.point - p, at.normal, at.linearity))
+            Some((n.point - p, at.normal, at.linearity, at.normal_sigma))
         })
     };
     let (mut pairs, mut with_normal) = (0usize, 0usize);
     let mut sum_sq = 0.0;
     let mut spread = Matrix2::zeros();
-    for (d, normal, _) in paired() {
+    for (d, normal, _, _) in paired() {
         pairs += 1;
         if normal == Vector2::zeros() {
             sum_sq += d.norm_squared() / 2.0;
@@ -103,13 +114,15 @@ pub fn weak_direction<I: SpatialIndex>(
     // What each point tells along u, as a share of a point facing it head-on; a point
     // telling less than a straight surface at 60° does is noise (a far, sparse wall's fit).
     let (mut facing, mut count) = (0.0, 0);
-    for (_, n, l) in paired() {
+    for (_, n, l, sigma_n) in paired() {
         // A point without a normal is a sample of a surface of unknown direction: in a map
         // most are a far wall's sparse samples at a grazing angle, not posts.
         if n == Vector2::zeros() {
             continue;
         }
-        let c = n.dot(&u).abs();
+        // How far the surface turns from running along u, less what its fit's noise turns it.
+        let turned = n.dot(&u).abs().min(1.0).asin();
+        let c = (turned - FACING_SIGMAS * sigma_n).max(0.0).sin();
         let w = l * c * c + (1.0 - l);
         if w >= FACING_COS * FACING_COS {
             facing += w;

@@ -16,12 +16,22 @@ fn zigzag(k: usize) -> Pose2 {
 /// 60 scans of `world` along the zigzag, odometry exact, matched by `kind` holding the
 /// directions the scan does not fix or not.
 fn run(world: &SyntheticWorld, kind: MatcherKind, hold: bool) -> Vec<Estimate> {
+    run_with_beams(world, kind, hold, 181)
+}
+
+/// [`run`] with a laser of `beams` beams over 180°.
+fn run_with_beams(
+    world: &SyntheticWorld,
+    kind: MatcherKind,
+    hold: bool,
+    beams: usize,
+) -> Vec<Estimate> {
     let mut config = MatcherConfig::defaults(kind);
     config.motion.hold_unobserved = hold;
     let mut pipeline = config.build().expect("builds");
     (0..60)
         .map(|k| {
-            let mut scan = world.scan(&zigzag(k), 0.01, k as u64 + 1);
+            let mut scan = world.scan_with_beams(&zigzag(k), beams, 0.01, k as u64 + 1);
             scan.timestamp = k as f64;
             pipeline.process(&Record {
                 scan,
@@ -70,6 +80,26 @@ fn along_a_corridor_past_the_lasers_reach_the_match_keeps_odometry() {
             "{kind}: {free:.4} m without, {held:.4} m with"
         );
         // Across the axis the scan's estimate stands.
+        assert!(across < 0.02, "{kind}: {across:.4} m across");
+    }
+}
+
+#[test]
+fn a_dense_lasers_noisy_normals_do_not_face_the_corridors_axis() {
+    // 721 beams (0.25°): the side walls, 1.2 m away, are sampled every 5-10 mm where they
+    // pass the robot, and lines fitted through five such samples turn by tens of degrees at
+    // random, enough for a few to face the axis. Counted as surfaces facing it, they said
+    // the scan fixed the axis and the matches crept along it. Measured along the axis, with
+    // the hold and noise's turn counted / discounted / without the hold: q-wsm 0.1466 /
+    // 0.0038 / 0.2464 m, q-idc 0.0290 / 0.0009 / 0.0276 m.
+    let corridor = SyntheticWorld::featureless_corridor();
+    for kind in [MatcherKind::QWsm, MatcherKind::QIdc] {
+        let (held, across) = worst(&run_with_beams(&corridor, kind, true, 721));
+        let (free, _) = worst(&run_with_beams(&corridor, kind, false, 721));
+        assert!(
+            held < 0.005 && free > 3.0 * held,
+            "{kind}: {held:.4} m along the axis with the hold, {free:.4} m without"
+        );
         assert!(across < 0.02, "{kind}: {across:.4} m across");
     }
 }
