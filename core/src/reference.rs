@@ -170,47 +170,41 @@ pub fn scan_point_info(scan: &Scan, noise: &LaserNoise) -> Vec<PointInfo> {
             let n = window.len() as f64;
             let (sxx, sxy, syy) = fit.scatter;
             let spacing = (window[window.len() - 1] - window[0]).norm() / (n - 1.0);
+            let (linearity, normal_sigma) =
+                line_quality(sxx, sxy, syy, window.len(), noise.sigma_range);
             PointInfo {
                 normal: fit.normal,
                 spacing: spacing.max(1e-4),
                 covariance,
-                linearity: linearity(sxx, sxy, syy, window.len(), noise.sigma_range),
-                normal_sigma: normal_sigma(sxx, sxy, syy, window.len(), noise.sigma_range),
+                linearity,
+                normal_sigma,
             }
         })
         .collect()
 }
 
-/// Linearity of `n` points with scatter matrix `[[sxx, sxy], [sxy, syy]]` (about their mean):
-/// 1 when their spread across the fitted line, σ̂ = sqrt(λmin / (n − 2)), is within twice the
-/// range noise σ (real walls are a little rough), falling to 0 at 4σ. Two points always fit a
-/// line and prove nothing: 0.
-fn linearity(sxx: f64, sxy: f64, syy: f64, n: usize, sigma: f64) -> f64 {
-    if n < 3 || sigma <= 0.0 {
-        return 0.0;
-    }
-    let (lambda_min, _) = principal_scatter(sxx, sxy, syy);
-    let spread = (lambda_min / (n - 2) as f64).sqrt();
-    (2.0 - 0.5 * spread / sigma).clamp(0.0, 1.0)
-}
-
-/// The fitted line's direction noise ([`PointInfo::normal_sigma`]) for `n` points with
-/// scatter `[[sxx, sxy], [sxy, syy]]` and range noise `sigma`: the spread across the line,
-/// never below `sigma`, over the root of the scatter along it (a regression slope's
-/// deviation), at most π/2.
-fn normal_sigma(sxx: f64, sxy: f64, syy: f64, n: usize, sigma: f64) -> f64 {
+/// How well `n` points with scatter matrix `[[sxx, sxy], [sxy, syy]]` (about their mean) fit
+/// a line, from one eigen-decomposition and one spread across it, σ̂ = sqrt(λmin / (n − 2)):
+/// - linearity ([`PointInfo::linearity`]): 1 when σ̂ is within twice the range noise σ (real
+///   walls are a little rough), falling to 0 at 4σ; two points always fit a line and prove
+///   nothing: 0;
+/// - the normal's deviation ([`PointInfo::normal_sigma`]): σ̂, never below σ (σ alone for two
+///   points), over the root of the scatter along the line, λmax (a regression slope's
+///   deviation), at most π/2.
+fn line_quality(sxx: f64, sxy: f64, syy: f64, n: usize, sigma: f64) -> (f64, f64) {
     let (lambda_min, lambda_max) = principal_scatter(sxx, sxy, syy);
-    let across = if n > 2 {
-        (lambda_min / (n - 2) as f64).sqrt().max(sigma)
-    } else {
-        sigma
+    let spread = (n > 2).then(|| (lambda_min / (n - 2) as f64).sqrt());
+    let linearity = match spread {
+        Some(spread) if sigma > 0.0 => (2.0 - 0.5 * spread / sigma).clamp(0.0, 1.0),
+        _ => 0.0,
     };
-    let s = across / lambda_max.sqrt();
-    if s.is_finite() {
-        s.min(std::f64::consts::FRAC_PI_2)
+    let deviation = spread.map_or(sigma, |spread| spread.max(sigma)) / lambda_max.sqrt();
+    let normal_sigma = if deviation.is_finite() {
+        deviation.min(std::f64::consts::FRAC_PI_2)
     } else {
         std::f64::consts::FRAC_PI_2
-    }
+    };
+    (linearity, normal_sigma)
 }
 
 /// The scatter matrix's eigenvalues (across the principal axis, along it), never negative.
