@@ -112,6 +112,15 @@ pub fn around_radius(
     (reach <= max_reach).then_some(reach + slack)
 }
 
+/// A revision no index has had before: the value an index takes each time its point set
+/// changes ([`SpatialIndex::revision`]). Unique across every index of the process, so two
+/// indexes share a revision only where one is a clone of the other, unchanged since.
+#[must_use]
+pub fn fresh_revision() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
+
 /// A set of 2D points that grows by insertion and answers proximity queries.
 ///
 /// Queries with a non-finite query point return nothing. Matchers are generic over this trait,
@@ -161,6 +170,16 @@ pub trait SpatialIndex {
         None
     }
 
+    /// Which state of the point set this is: a value that changes with every insertion,
+    /// removal and clear ([`fresh_revision`]; 0 for a new, empty index), so that a caller may
+    /// keep what its searches found from one use to the next while it stays the same (the
+    /// correspondence caches keep their neighbourhoods from scan to scan while the map does
+    /// not change). `None` (the default) where the index does not count: callers then keep
+    /// nothing between uses.
+    fn revision(&self) -> Option<u64> {
+        None
+    }
+
     /// The nearest point, if the index is not empty.
     fn nearest(&self, q: &Point2<f64>) -> Option<Neighbour> {
         self.nearest_within(q, f64::INFINITY)
@@ -202,6 +221,7 @@ pub struct BruteForce {
     points: Vec<Point2<f64>>,
     /// Per point: taken out of the searches ([`SpatialIndex::remove`]).
     removed: Vec<bool>,
+    revision: u64,
 }
 
 impl BruteForce {
@@ -225,20 +245,29 @@ impl SpatialIndex for BruteForce {
         check_point(&p, self.points.len())?;
         self.points.push(p);
         self.removed.push(false);
+        self.revision = fresh_revision();
         Ok((self.points.len() - 1) as PointId)
     }
 
     fn clear(&mut self) {
         self.points.clear();
         self.removed.clear();
+        self.revision = fresh_revision();
     }
 
     fn remove(&mut self, id: PointId) -> Option<bool> {
-        Some(
-            self.removed
-                .get_mut(id as usize)
-                .is_some_and(|r| !std::mem::replace(r, true)),
-        )
+        let removed = self
+            .removed
+            .get_mut(id as usize)
+            .is_some_and(|r| !std::mem::replace(r, true));
+        if removed {
+            self.revision = fresh_revision();
+        }
+        Some(removed)
+    }
+
+    fn revision(&self) -> Option<u64> {
+        Some(self.revision)
     }
 
     fn points(&self) -> &[Point2<f64>] {

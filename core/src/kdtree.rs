@@ -1,6 +1,8 @@
 //! A kd-tree index on the `kiddo` crate.
 
-use crate::index::{IndexError, Neighbour, PointId, SpatialIndex, check_point, dist_sq};
+use crate::index::{
+    IndexError, Neighbour, PointId, SpatialIndex, check_point, dist_sq, fresh_revision,
+};
 use kiddo::SquaredEuclidean;
 use nalgebra::Point2;
 use std::collections::HashMap;
@@ -23,6 +25,7 @@ pub struct KdTree {
     points: Vec<Point2<f64>>,
     axis_counts: [HashMap<u64, u32>; 2],
     overflow: Vec<PointId>,
+    revision: u64,
 }
 
 impl KdTree {
@@ -58,6 +61,7 @@ impl SpatialIndex for KdTree {
         check_point(&p, self.points.len())?;
         let id = self.points.len() as PointId;
         self.points.push(p);
+        self.revision = fresh_revision();
         let kx = key(p.x);
         let ky = key(p.y);
         let crowded = [kx, ky]
@@ -81,10 +85,15 @@ impl SpatialIndex for KdTree {
         self.points.clear();
         self.axis_counts.iter_mut().for_each(HashMap::clear);
         self.overflow.clear();
+        self.revision = fresh_revision();
     }
 
     fn points(&self) -> &[Point2<f64>] {
         &self.points
+    }
+
+    fn revision(&self) -> Option<u64> {
+        Some(self.revision)
     }
 
     /// Out of the overflow list, or out of kiddo (whose coordinate counts then drop).
@@ -94,6 +103,7 @@ impl SpatialIndex for KdTree {
         };
         if let Some(k) = self.overflow.iter().position(|&o| o == id) {
             self.overflow.swap_remove(k);
+            self.revision = fresh_revision();
             return Some(true);
         }
         let removed = self
@@ -101,6 +111,7 @@ impl SpatialIndex for KdTree {
             .as_mut()
             .is_some_and(|t| t.remove(&[p.x, p.y], id) > 0);
         if removed {
+            self.revision = fresh_revision();
             for (k, counts) in [key(p.x), key(p.y)].iter().zip(&mut self.axis_counts) {
                 if let Some(c) = counts.get_mut(k) {
                     *c -= 1;

@@ -31,7 +31,7 @@ pub mod testdata;
 pub use config_error::ConfigError;
 pub use index::{
     BruteForce, IndexError, Neighbour, PointId, SpatialIndex, around_radius, dist_sq,
-    nearest_then_around,
+    fresh_revision, nearest_then_around,
 };
 pub use kdtree::KdTree;
 pub use matcher::ScanMatcher;

@@ -77,17 +77,37 @@ struct CachedSearch {
     slack: f64,
 }
 
-/// Identity of a reference for the caches: its length and first point. The caches are kept
-/// between the iterations of one scan, while the reference does not change.
-fn reference_identity<I: SpatialIndex>(reference: &I) -> (usize, Point2<f64>) {
-    (
-        reference.len(),
-        reference
-            .points()
-            .first()
-            .copied()
-            .unwrap_or_else(Point2::origin),
-    )
+/// Identity of a reference for the caches: its [revision](SpatialIndex::revision) where the
+/// index counts them, and its length and first point. The caches are kept while the
+/// reference does not change: from scan to scan where the index counts its revisions (most
+/// scans leave the map as it was), otherwise between the iterations of one scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Identity {
+    revision: Option<u64>,
+    len: usize,
+    first: Point2<f64>,
+}
+
+impl Identity {
+    fn of<I: SpatialIndex>(reference: &I) -> Self {
+        Self {
+            revision: reference.revision(),
+            len: reference.len(),
+            first: reference
+                .points()
+                .first()
+                .copied()
+                .unwrap_or_else(Point2::origin),
+        }
+    }
+}
+
+/// What a new scan keeps of a cache filled from `cached_for`: everything while a reference
+/// that counts its revisions stays at the one it had (checked at the next search), nothing
+/// from one that does not count (another object may have taken its length and first point,
+/// or it may have changed without changing them).
+fn kept_for_next_scan(cached_for: Option<Identity>) -> Option<Identity> {
+    cached_for.filter(|c| c.revision.is_some())
 }
 
 /// Nearest-neighbour searches cached between the iterations of one scan, one entry per scan
@@ -102,7 +122,7 @@ fn reference_identity<I: SpatialIndex>(reference: &I) -> (usize, Point2<f64>) {
 #[derive(Debug, Clone, Default)]
 struct NearestCache {
     entries: Vec<CachedSearch>,
-    cached_for: Option<(usize, Point2<f64>)>,
+    cached_for: Option<Identity>,
 }
 
 impl NearestCache {
@@ -120,14 +140,21 @@ impl NearestCache {
     const MAX_RADIUS: f64 = 0.3;
 
     /// Forgets every entry.
+    #[cfg(test)]
     fn reset(&mut self) {
         self.cached_for = None;
+    }
+
+    /// A new scan: the entries stay where the reference counts its revisions
+    /// ([`kept_for_next_scan`]); the next search checks it is still the same.
+    fn next_scan(&mut self) {
+        self.cached_for = kept_for_next_scan(self.cached_for);
     }
 
     /// Prepares for `n` scan points searched in `reference`; entries from another reference
     /// are dropped.
     fn prepare<I: SpatialIndex>(&mut self, reference: &I, n: usize) {
-        let identity = reference_identity(reference);
+        let identity = Identity::of(reference);
         if self.cached_for != Some(identity) {
             for e in &mut self.entries {
                 e.radius = -1.0;
@@ -219,17 +246,18 @@ impl NearestCache {
 /// pair it must lie within the outlier gate `max_dist` of the point: in a symmetric corridor
 /// the opposite wall has the same range inside a wide window.
 ///
-/// The candidates of each scan point come from a radius search that is kept between calls of
-/// one scan (see [`begin_scan`](CorrespondenceMetric::begin_scan)): while the point has moved
-/// less than the search's slack it is filtered again instead of repeated, with the same
-/// answer as a fresh search.
+/// The candidates of each scan point come from a radius search that is kept between calls
+/// while the reference stays the same (within one scan, and from scan to scan where the index
+/// counts its [revisions](SpatialIndex::revision)): while the point has moved less than the
+/// search's slack it is filtered again instead of repeated, with the same answer as a fresh
+/// search.
 #[derive(Debug, Clone, Default)]
 pub struct MatchingRange {
     /// Half-width of the angular window (rad).
     pub window: f64,
     cache: Vec<CachedSearch>,
-    /// Identity of the reference the cache was filled from: its length and first point.
-    cached_for: Option<(usize, Point2<f64>)>,
+    /// Identity of the reference the cache was filled from.
+    cached_for: Option<Identity>,
 }
 
 impl MatchingRange {
@@ -245,13 +273,13 @@ impl MatchingRange {
 
 impl CorrespondenceMetric for MatchingRange {
     fn begin_scan(&mut self, _local: &[Point2<f64>]) {
-        self.cached_for = None;
+        self.cached_for = kept_for_next_scan(self.cached_for);
     }
 
     fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {
         out.clear();
-        // A cache filled from another reference (or before it grew) is dropped.
-        let identity = reference_identity(reference);
+        // A cache filled from another reference (or before it changed) is dropped.
+        let identity = Identity::of(reference);
         if self.cached_for != Some(identity) {
             for c in &mut self.cache {
                 c.radius = -1.0;
@@ -382,8 +410,10 @@ impl<S: SpatialIndex> CorrespondenceMetric for MutualNearest<S> {
             // Scan points are finite by construction; a refused one simply cannot pair.
             let _ = self.scan_index.insert(*p);
         }
-        self.in_reference.reset();
-        self.in_scan.reset();
+        // The map's searches stay valid while the map does; the scan's index was just
+        // rebuilt, which a counting index tells by its revision.
+        self.in_reference.next_scan();
+        self.in_scan.next_scan();
     }
 
     fn pair<I: SpatialIndex>(&mut self, reference: &I, query: &Query<'_>, out: &mut Vec<Pair>) {

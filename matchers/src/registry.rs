@@ -143,6 +143,15 @@ impl SpatialIndex for Box<dyn AnyIndex> {
     fn clear(&mut self) {
         (**self).clear();
     }
+    fn remove(&mut self, id: qicp_core::PointId) -> Option<bool> {
+        (**self).remove(id)
+    }
+    fn revision(&self) -> Option<u64> {
+        (**self).revision()
+    }
+    fn len(&self) -> usize {
+        (**self).len()
+    }
     fn points(&self) -> &[qicp_core::Point2<f64>] {
         (**self).points()
     }

@@ -609,3 +609,55 @@ fn values_of_the_wrong_type_name_their_key() {
         assert!(e.contains(&format!("`{key}`")), "{key} not named: {e}");
     }
 }
+
+/// An index registered at run time is reached through `Box<dyn AnyIndex>`, which passes its
+/// removals and revisions on: a map carves a wrong match's wall out of it in place, as out of
+/// the index itself (before, the box refused removal and the map rebuilt the index, renumbering
+/// every point), and the correspondence rules can keep their searches between scans.
+#[test]
+fn a_registered_index_removes_in_place_and_counts_its_revisions() {
+    use qicp_core::testdata::SyntheticWorld;
+    use qicp_core::{BruteForce, Merge, Point2, Pose2, Reference, SpatialIndex};
+    use qicp_matchers::AnyIndex;
+
+    fn room<I: SpatialIndex>(index: I) -> Reference<I> {
+        let world = SyntheticWorld::room();
+        let carving = Merge {
+            free_space_margin: 0.1,
+            ..Merge::spacing(0.01)
+        };
+        let mut map = Reference::new(index);
+        for k in 0..20 {
+            let a = k as f64 * 0.7;
+            let truth = Pose2::new(3.0 * a.cos(), 2.5 * (1.3 * a).sin(), 0.9 * a);
+            // The sixth scan laid 20° off: a wrong match the scans after it see through.
+            let laid = if k == 5 {
+                Pose2::new(truth.x, truth.y, truth.theta + 0.35)
+            } else {
+                truth
+            };
+            map.insert_scan(&world.scan(&truth, 0.005, k + 1), &laid, Some(carving))
+                .expect("finite points");
+        }
+        map
+    }
+    let plain = room(BruteForce::default());
+    let boxed = room::<Box<dyn AnyIndex>>(Box::new(BruteForce::default()));
+    assert!(plain.stale_len() > 0, "the wrong wall was carved");
+    assert_eq!(boxed.renumberings(), 0, "carved in place");
+    assert_eq!(
+        boxed.index().points(),
+        plain.index().points(),
+        "the same ids"
+    );
+    assert_eq!(boxed.live_points(), plain.live_points());
+
+    let mut index: Box<dyn AnyIndex> = Box::new(BruteForce::default());
+    index.insert(Point2::new(0.0, 0.0)).unwrap();
+    index.insert(Point2::new(1.0, 0.0)).unwrap();
+    let before = index.revision();
+    assert!(before.is_some(), "the box passes the revision on");
+    assert_eq!(index.remove(1), Some(true));
+    assert_ne!(index.revision(), before, "a removal is a new revision");
+    assert_eq!(index.nearest(&Point2::new(1.0, 0.1)).map(|n| n.id), Some(0));
+}

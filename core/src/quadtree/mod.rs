@@ -14,7 +14,7 @@
 //!   deepens the tree nor slows queries. Cells stop splitting below [`MIN_HALF`]; points closer
 //!   than that spill into chained overflow leaves.
 
-use crate::index::{IndexError, Neighbour, PointId, SpatialIndex, check_point};
+use crate::index::{IndexError, Neighbour, PointId, SpatialIndex, check_point, fresh_revision};
 use nalgebra::Point2;
 
 mod search;
@@ -97,6 +97,7 @@ pub struct QuadTreeN<const B: usize> {
     points: Vec<Point2<f64>>,
     /// Next point with the same coordinates as this one, or `NONE`.
     dup_next: Vec<PointId>,
+    revision: u64,
 }
 
 impl<const B: usize> Default for QuadTreeN<B> {
@@ -116,6 +117,7 @@ impl<const B: usize> Default for QuadTreeN<B> {
             leaf_next: Vec::new(),
             points: Vec::new(),
             dup_next: Vec::new(),
+            revision: 0,
         }
     }
 }
@@ -303,6 +305,7 @@ impl<const B: usize> SpatialIndex for QuadTreeN<B> {
         let id = self.points.len() as PointId;
         self.points.push(p);
         self.dup_next.push(NONE);
+        self.revision = fresh_revision();
         let (x, y) = (p.x, p.y);
         if self.nodes.is_empty() {
             let leaf = self.new_leaf();
@@ -373,7 +376,15 @@ impl<const B: usize> SpatialIndex for QuadTreeN<B> {
         let Some(&p) = self.points.get(id as usize) else {
             return Some(false);
         };
-        Some(self.remove_point(id, p.x, p.y))
+        let removed = self.remove_point(id, p.x, p.y);
+        if removed {
+            self.revision = fresh_revision();
+        }
+        Some(removed)
+    }
+
+    fn revision(&self) -> Option<u64> {
+        Some(self.revision)
     }
 
     fn clear(&mut self) {
@@ -385,6 +396,7 @@ impl<const B: usize> SpatialIndex for QuadTreeN<B> {
         self.leaf_next.clear();
         self.points.clear();
         self.dup_next.clear();
+        self.revision = fresh_revision();
     }
 
     fn points(&self) -> &[Point2<f64>] {
