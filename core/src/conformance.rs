@@ -1,7 +1,8 @@
 //! The conformance suite every [`SpatialIndex`] must pass: the same answers as the
 //! [`BruteForce`] oracle on seeded data sets chosen to break indexes (uniform, laser-like
 //! lines, heavy duplicates, axis-aligned lines, points far outside the first bounds, tiny
-//! clusters), refusals of bad points, and the empty and one-point cases.
+//! clusters), refusals of bad points, the empty and one-point cases, and revisions that
+//! follow every change of the point set.
 //!
 //! Behind the `testkit` feature. A new index runs it in its own tests with one macro call:
 //!
@@ -292,6 +293,47 @@ pub fn empty_and_single<I: SpatialIndex + Default>() {
     );
 }
 
+/// An index that counts its revisions ([`SpatialIndex::revision`]) takes a new one at every
+/// change of its point set (an insertion, a removal of a held point, a clear) and keeps it
+/// through refused points, removals of points it does not hold, and searches; a new index
+/// is at 0. One that does not count says `None` throughout.
+pub fn revisions<I: SpatialIndex + Default>() {
+    let mut index = I::default();
+    if index.revision().is_none() {
+        index.insert(Point2::new(1.0, 2.0)).expect("a finite point");
+        index.clear();
+        assert_eq!(index.revision(), None, "an index counts always or never");
+        return;
+    }
+    assert_eq!(index.revision(), Some(0), "a new index");
+    let mut seen = vec![index.revision()];
+    let mut step = |index: &I, what: &str, changed: bool| {
+        let r = index.revision();
+        assert!(r.is_some(), "{what}: an index counts always or never");
+        assert_eq!(!seen.contains(&r), changed, "{what}: {r:?} after {seen:?}");
+        seen.push(r);
+    };
+    index.insert(Point2::new(1.0, 2.0)).expect("a finite point");
+    step(&index, "an insertion", true);
+    index.insert(Point2::new(3.0, 2.0)).expect("a finite point");
+    step(&index, "a second insertion", true);
+    assert!(index.insert(Point2::new(f64::NAN, 0.0)).is_err());
+    step(&index, "a refused point", false);
+    let _ = index.nearest_within(&Point2::new(1.0, 2.0), 1.0);
+    let mut out = Vec::new();
+    index.within_radius(&Point2::new(1.0, 2.0), 5.0, &mut out);
+    step(&index, "searches", false);
+    if index.remove(0) == Some(true) {
+        step(&index, "a removal", true);
+        assert_eq!(index.remove(0), Some(false));
+        step(&index, "a removal of a point already out", false);
+    }
+    index.clear();
+    step(&index, "a clear", true);
+    index.insert(Point2::new(1.0, 2.0)).expect("a finite point");
+    step(&index, "an insertion after a clear", true);
+}
+
 /// Generates the conformance tests (`#[test]` functions, one module per index) for each
 /// `name: Type` given; `Type` must implement [`SpatialIndex`] and `Default`.
 #[macro_export]
@@ -313,6 +355,7 @@ macro_rules! index_conformance {
             #[test] fn removal_tiny_clusters() { check_removal::<$index>(&uniform(2000, 1e-5, 11), 11) }
             #[test] fn bad_points() { refuses_bad_points::<$index>() }
             #[test] fn empty_and_single_point() { empty_and_single::<$index>() }
+            #[test] fn revisions_follow_every_change() { revisions::<$index>() }
         }
     )*};
 }

@@ -193,36 +193,18 @@ fn an_index_that_does_not_count_its_revisions_keeps_nothing_between_scans() {
     assert!(drive::<Uncounted<QuadTree>>(&CHANGES) > 10_000);
 }
 
-/// Every change of the point set gives an index a revision no index had before; a search
-/// leaves it as it was.
+/// Two indexes changed alike take different revisions: a rule that kept its searches of one
+/// never takes the other for it.
 #[test]
-fn every_change_of_the_point_set_gives_a_new_revision() {
+fn two_indexes_never_share_a_revision_after_a_change() {
     fn check<I: SpatialIndex + Default>() {
         let (mut a, mut b) = (I::default(), I::default());
-        assert_eq!(a.revision(), Some(0), "a new index");
-        let mut seen = vec![a.revision()];
-        let mut step = |index: &mut I, what: &str, changed: bool| {
-            let r = index.revision();
-            assert!(r.is_some(), "{what}");
-            assert_eq!(!seen.contains(&r), changed, "{what}: {r:?} among {seen:?}");
-            seen.push(r);
-        };
         a.insert(Point2::new(1.0, 2.0)).unwrap();
-        step(&mut a, "an insertion", true);
         b.insert(Point2::new(1.0, 2.0)).unwrap();
-        step(&mut b, "the same insertion into another index", true);
-        a.insert(Point2::new(3.0, 2.0)).unwrap();
-        step(&mut a, "a second insertion", true);
-        assert!(a.insert(Point2::new(f64::NAN, 0.0)).is_err());
-        step(&mut a, "a refused point", false);
-        let _ = a.nearest_within(&Point2::new(1.0, 2.0), 1.0);
-        step(&mut a, "a search", false);
-        assert_eq!(a.remove(0), Some(true));
-        step(&mut a, "a removal", true);
-        assert_eq!(a.remove(0), Some(false));
-        step(&mut a, "a removal of a point already out", false);
+        assert_ne!(a.revision(), b.revision());
         a.clear();
-        step(&mut a, "a clear", true);
+        b.clear();
+        assert_ne!(a.revision(), b.revision());
     }
     check::<QuadTree>();
     check::<KdTree>();
