@@ -110,8 +110,9 @@ fn kept_for_next_scan(cached_for: Option<Identity>) -> Option<Identity> {
     cached_for.filter(|c| c.revision.is_some())
 }
 
-/// Nearest-neighbour searches cached between the iterations of one scan, one entry per scan
-/// point. A miss asks the index for the nearest point and then keeps every point within that
+/// Nearest-neighbour searches cached while the reference stays the same (between the
+/// iterations of one scan, and from scan to scan where the index counts its revisions; see
+/// [`Identity`]), one entry per scan point. A miss asks the index for the nearest point and then keeps every point within that
 /// distance plus a slack; while the scan point stays inside that disc, the
 /// answer is found among the kept points alone, with the same distance as a fresh search
 /// (any point nearer than the kept answer lies inside the disc). Late iterations move the
