@@ -210,3 +210,102 @@ fn two_indexes_never_share_a_revision_after_a_change() {
     check::<KdTree>();
     check::<BruteForce>();
 }
+
+/// An index that counts the searches made in it, and counts its revisions or not.
+#[derive(Debug, Default)]
+struct Searches<I> {
+    index: I,
+    counted: bool,
+    searches: std::cell::Cell<usize>,
+}
+
+impl<I: SpatialIndex> SpatialIndex for Searches<I> {
+    fn insert(&mut self, p: Point2<f64>) -> Result<PointId, qicp_core::IndexError> {
+        self.index.insert(p)
+    }
+    fn clear(&mut self) {
+        self.index.clear();
+    }
+    fn points(&self) -> &[Point2<f64>] {
+        self.index.points()
+    }
+    fn nearest_within(&self, q: &Point2<f64>, max_dist_sq: f64) -> Option<Neighbour> {
+        self.searches.set(self.searches.get() + 1);
+        self.index.nearest_within(q, max_dist_sq)
+    }
+    fn within_radius(&self, q: &Point2<f64>, radius: f64, out: &mut Vec<Neighbour>) {
+        self.searches.set(self.searches.get() + 1);
+        self.index.within_radius(q, radius, out);
+    }
+    fn k_nearest(&self, q: &Point2<f64>, k: usize, out: &mut Vec<Neighbour>) {
+        self.searches.set(self.searches.get() + 1);
+        self.index.k_nearest(q, k, out);
+    }
+    fn revision(&self) -> Option<u64> {
+        self.index.revision().filter(|_| self.counted)
+    }
+}
+
+/// The searches a scan makes in an unchanged map right after another scan from a pose a
+/// millimetre away, as a share of the first scan's: both rules, one iteration each.
+fn searches_again(counted: bool) -> (f64, f64) {
+    let mut map = Searches::<QuadTree> {
+        counted,
+        ..Searches::default()
+    };
+    for p in laser_scans(20_000, 41) {
+        map.insert(p).expect("a finite point");
+    }
+    let robot = Pose2::new(-10.0, 0.0, 0.2);
+    let o = Point2::new(robot.x, robot.y);
+    let local: Vec<Point2<f64>> = map
+        .points()
+        .iter()
+        .filter(|m| dist_sq(m, &o) < 64.0)
+        .step_by(7)
+        .take(150)
+        .map(|m| robot.inverse_transform_point(m))
+        .collect();
+    let mut mutual = MutualNearest::<QuadTree>::default();
+    let mut range = MatchingRange::new(3f64.to_radians());
+    let mut pairs = Vec::new();
+    let mut counts = [[0usize; 2]; 2];
+    for (scan, pose) in [robot, robot * Pose2::new(0.001, 0.0, 0.0)]
+        .iter()
+        .enumerate()
+    {
+        let moved: Vec<Point2<f64>> = local.iter().map(|p| pose.transform_point(p)).collect();
+        let query = Query {
+            local: &local,
+            points: &moved,
+            pose: *pose,
+            max_dist: 0.3,
+        };
+        mutual.begin_scan(&local);
+        map.searches.set(0);
+        mutual.pair(&map, &query, &mut pairs);
+        counts[0][scan] = map.searches.get();
+        range.begin_scan(&local);
+        map.searches.set(0);
+        range.pair(&map, &query, &mut pairs);
+        counts[1][scan] = map.searches.get();
+    }
+    let share = |c: [usize; 2]| c[1] as f64 / c[0].max(1) as f64;
+    (share(counts[0]), share(counts[1]))
+}
+
+/// The point of keeping: a scan in a map its predecessor left unchanged answers most of its
+/// searches from what the predecessor found; without revisions it searches everything again.
+#[test]
+fn a_scan_in_an_unchanged_map_reuses_its_predecessors_searches() {
+    let (mutual, range) = searches_again(true);
+    assert!(
+        mutual < 0.2 && range < 0.2,
+        "searched again: {mutual:.2}, {range:.2}"
+    );
+    let (mutual, range) = searches_again(false);
+    assert!(
+        mutual > 0.9 && range > 0.9,
+        "searched again: {mutual:.2}, {range:.2}"
+    );
+}
