@@ -295,12 +295,13 @@ pub struct MotionModel {
     /// Where odometry repeats one reading while the matches saw the robot move (as for
     /// `stall_restart`), the repeated reading holds no motion: the stall's further records
     /// are predicted at the laser's last velocity (its motion over the last record whose
-    /// match passed the check against a running level, as KISS-ICP predicts at constant
-    /// velocity with no odometry; none before the check has a level or with validation off,
-    /// where the last pose stands) and matched without odometry's prior, so that odometry's
-    /// veto does not hold them to a robot standing still. A log with no odometry at all
-    /// (every reading the same) is one such stall from its second record on. false predicts
-    /// a stall's records where the repeated reading says, with its prior. Default true.
+    /// match passed the check against a running level, or stood where odometry that moves
+    /// weighed it and did not contradict it, as KISS-ICP predicts at constant velocity with
+    /// no odometry; none before then or with validation off, where the last pose stands)
+    /// and matched without odometry's prior, so that odometry's veto does not hold them to
+    /// a robot standing still. A log with no odometry at all (every reading the same) is one
+    /// such stall from its second record on. false predicts a stall's records where the
+    /// repeated reading says, with its prior. Default true.
     pub stall_velocity: bool,
     /// With `stall_velocity`, in a log without odometry (every reading so far the first one),
     /// against a map, the prediction at the last checked velocity is weighed as a prior (by
@@ -1112,11 +1113,16 @@ where
         // In the world: the corrected laser pose times the inverse of the match's.
         let correction = check.reanchored.then(|| laser * matched.inverse());
         OdometryRun::follow(&mut self.run, fresh, contradicted, laser, correction);
-        // The motion as matched, where the match passed the check and stands (a re-anchoring's
-        // correction is drift, not velocity); elsewhere the last such motion stays: a poor
-        // match's motion would carry its error into the next prediction.
+        // The motion as matched, where the match stands and something vouches for it: it
+        // passed the check, or odometry that moves weighed it and did not contradict it (a
+        // fast turn's matches leave residuals above the level, and a stall right after must
+        // not be predicted at the motion of some earlier turn). A re-anchoring's correction is
+        // drift, not velocity. Elsewhere the last such motion stays: a poor match's motion
+        // would carry its error into the next prediction.
+        let vouched_by_wheels =
+            self.validator.params.enabled && by_odometry && !check.refused && !contradicted;
         if let Some((_, previous)) = self.last
-            && passed
+            && (passed || vouched_by_wheels)
             && result.fallback.is_none()
             && !check.withheld
         {
