@@ -901,9 +901,10 @@ fn turning_back(k: usize) -> Pose2 {
 
 /// `config` over the drive of [`turning_back`], whose scans from 13 on see no returns over
 /// the right 40 % of their view, so that their matches stand (what they pair fits) but keep
-/// too few pairs for the check's running level, and whose odometry repeats its reading of scan 19 for scans 20 to 23 and then reads
-/// the truth again: the worst heading error (deg) from scan 20 on against the truth's turn,
-/// and how many scans of the left turn before the stall were searched and not refused.
+/// too few pairs for the check's running level, and whose odometry repeats its reading of
+/// scan 19 for scans 20 to 23 and then reads the truth again: the worst heading error (deg)
+/// from scan 20 on against the truth's turn, and how many matches of the left turn before
+/// the stall stood without passing the check (searched, neither recovered nor refused).
 fn stall_after_a_turn_no_match_passed(config: MatcherConfig) -> (f64, usize) {
     let mut odometry = config.build().expect("builds");
     let (mut first, mut worst, mut unchecked) = (None, 0.0f64, 0);
@@ -924,11 +925,7 @@ fn stall_after_a_turn_no_match_passed(config: MatcherConfig) -> (f64, usize) {
             laser_offset: Pose2::IDENTITY,
         });
         let first = *first.get_or_insert(e.pose.theta);
-        eprintln!(
-            "k {k} res {:.4} corr {} check {:?} ins {}",
-            e.result.residual, e.result.correspondences, e.check, e.inserted
-        );
-        if (13..20).contains(&k) && e.check.searched && !e.check.refused {
+        if (13..20).contains(&k) && e.check.searched && !e.check.recovered && !e.check.refused {
             unchecked += 1;
         }
         if k >= 20 {
@@ -946,9 +943,9 @@ fn a_stall_after_a_turn_whose_matches_stood_unchecked_is_predicted_at_that_turn(
     // residuals rise) but does not refuse. Predicted at the motion of the last match that
     // passed, an earlier turn the other way, the stall's first record lay 21° off the truth
     // and q-wsm lost three records by 21-29°. Weighed against moving odometry and not
-    // contradicted, those matches give the stall its velocity.
-    // Predicted at the right turn's 15° a scan, this drive's stall lay 30° off: every
-    // matcher lost it (49-90° off) before the rule.
+    // contradicted, those matches give the stall its velocity. Predicted at the right
+    // turn's 15° a scan, this drive's stall lay 30° off: every matcher lost it (49-90° off)
+    // before the rule.
     for kind in [
         MatcherKind::QWsm,
         MatcherKind::QIdc,
