@@ -1115,7 +1115,7 @@ where
         OdometryRun::follow(&mut self.run, fresh, contradicted, laser, correction);
         // The motion as matched, where the match stands and something vouches for it: it
         // passed the check, or odometry that moves weighed it and did not contradict it (a
-        // fast turn's matches leave residuals above the level, and a stall right after must
+        // fast turn's matches keep too few pairs for the level, and a stall right after must
         // not be predicted at the motion of some earlier turn). A re-anchoring's correction is
         // drift, not velocity. Elsewhere the last such motion stays: a poor match's motion
         // would carry its error into the next prediction.

@@ -939,8 +939,8 @@ fn stall_after_a_turn_no_match_passed(config: MatcherConfig) -> (f64, usize) {
 
 #[test]
 fn a_stall_after_a_turn_whose_matches_stood_unchecked_is_predicted_at_that_turn() {
-    // The MIT CSAIL log stalls during fast turns whose matches the check finds poor (their
-    // residuals rise) but does not refuse. Predicted at the motion of the last match that
+    // The MIT CSAIL log stalls during fast turns whose matches the check finds poor (they
+    // keep 30-50 % fewer pairs) but does not refuse. Predicted at the motion of the last match that
     // passed, an earlier turn the other way, the stall's first record lay 21° off the truth
     // and q-wsm lost three records by 21-29°. Weighed against moving odometry and not
     // contradicted, those matches give the stall its velocity. Predicted at the right
