@@ -9,9 +9,9 @@ use qicp_core::{
 };
 use qicp_matchers::degeneracy::weak_direction;
 use qicp_matchers::{
-    CorrelativeParams, FieldOfView, IcpParams, Idc, IdcParams, MatcherConfig, MatcherKind,
-    MotionModel, Odometry, Pipeline, Placed, Policy, Relevance, ValidationParams, Validator, Wsm,
-    WsmParams,
+    CorrelativeParams, Estimate, FieldOfView, IcpParams, Idc, IdcParams, MatcherConfig,
+    MatcherKind, MotionModel, Odometry, Pipeline, Placed, Policy, Relevance, ValidationParams,
+    Validator, Wsm, WsmParams,
 };
 
 /// The robot's pose at scan `k`: along the room, turning slowly.
@@ -835,11 +835,25 @@ fn worst_heading_error(
     reading: impl Fn(usize) -> Pose2,
     from: usize,
 ) -> f64 {
+    let record = |k| room_record_at(&truth(k), k, reading(k));
+    worst_heading_error_of(config, &truth, record, from, |_, _| {})
+}
+
+/// [`worst_heading_error`] over 30 records built by `record(k)`, the robot at `truth(k)`;
+/// `each` sees every record's estimate.
+fn worst_heading_error_of(
+    config: MatcherConfig,
+    truth: impl Fn(usize) -> Pose2,
+    record: impl Fn(usize) -> Record,
+    from: usize,
+    mut each: impl FnMut(usize, &Estimate),
+) -> f64 {
     let mut odometry = config.build().expect("builds");
     let mut first = None;
     let mut worst = 0.0f64;
     for k in 0..30 {
-        let e = odometry.process(&room_record_at(&truth(k), k, reading(k)));
+        let e = odometry.process(&record(k));
+        each(k, &e);
         let first = *first.get_or_insert(e.pose.theta);
         if k >= from {
             let turned = truth(k).theta - truth(0).theta;
@@ -906,9 +920,7 @@ fn turning_back(k: usize) -> Pose2 {
 /// from scan 20 on against the truth's turn, and how many matches of the left turn before
 /// the stall stood without passing the check (searched, neither recovered nor refused).
 fn stall_after_a_turn_no_match_passed(config: MatcherConfig) -> (f64, usize) {
-    let mut odometry = config.build().expect("builds");
-    let (mut first, mut worst, mut unchecked) = (None, 0.0f64, 0);
-    for k in 0..30 {
+    let record = |k: usize| {
         let truth = turning_back(k);
         let full = SyntheticWorld::room().scan(&truth, 0.005, k as u64 + 1);
         let mut ranges = full.ranges().to_vec();
@@ -916,34 +928,31 @@ fn stall_after_a_turn_no_match_passed(config: MatcherConfig) -> (f64, usize) {
             // Something close by hides the right 40 % of the view: no returns there.
             ranges[..72].fill(f64::NAN);
         }
-        let scan = Scan::new(k as f64, full.geometry, ranges).expect("a valid scan");
         let read = if (20..24).contains(&k) { 19 } else { k };
-        let e = odometry.process(&Record {
-            scan,
+        Record {
+            scan: Scan::new(k as f64, full.geometry, ranges).expect("a valid scan"),
             odometry: turning_back(read),
             truth: Some(truth),
             laser_offset: Pose2::IDENTITY,
-        });
-        let first = *first.get_or_insert(e.pose.theta);
-        if (13..20).contains(&k) && e.check.searched && !e.check.recovered && !e.check.refused {
+        }
+    };
+    let mut unchecked = 0;
+    let worst = worst_heading_error_of(config, turning_back, record, 20, |k, e| {
+        let check = &e.check;
+        if (13..20).contains(&k) && check.searched && !check.recovered && !check.refused {
             unchecked += 1;
         }
-        if k >= 20 {
-            let turned = truth.theta - turning_back(0).theta;
-            let off = qicp_core::normalize_angle(e.pose.theta - first - turned);
-            worst = worst.max(off.abs().to_degrees());
-        }
-    }
+    });
     (worst, unchecked)
 }
 
 #[test]
 fn a_stall_after_a_turn_whose_matches_stood_unchecked_is_predicted_at_that_turn() {
     // The MIT CSAIL log stalls during fast turns whose matches the check finds poor (they
-    // keep 30-50 % fewer pairs) but does not refuse. Predicted at the motion of the last match that
-    // passed, an earlier turn the other way, the stall's first record lay 21° off the truth
-    // and q-wsm lost three records by 21-29°. Weighed against moving odometry and not
-    // contradicted, those matches give the stall its velocity. Predicted at the right
+    // keep 30-50 % fewer pairs) but does not refuse. Predicted at the motion of the last
+    // match that passed, an earlier turn the other way, the stall's first record lay 21° off
+    // the truth and q-wsm lost three records by 21-29°. Weighed against moving odometry and
+    // not contradicted, those matches give the stall its velocity. Predicted at the right
     // turn's 15° a scan, this drive's stall lay 30° off: every matcher lost it (49-90° off)
     // before the rule.
     for kind in [
