@@ -8,7 +8,9 @@ use crate::icp::non_negative;
 use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPolicy};
 use crate::revisit::{Revisit, RevisitParams};
 use crate::trail::{Amendment, Trail, moves_fit};
-use crate::validation::{Check, FieldOfView, Fit, Placed, ValidationParams, Validator, is_poor};
+use crate::validation::{
+    Check, FieldOfView, Fit, Placed, ValidationParams, Validator, is_poor, rescues_refused,
+};
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
     ScanMatcher, SpatialIndex,
@@ -725,7 +727,10 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     let f = self.fit(local, &again, again_placed.as_ref());
                     // Only a match that passes the check replaces the first: one poor
                     // match is not traded for another (an aliased corridor, a lone scan).
-                    if f.share > fit.share && !is_poor(f, level) {
+                    // Except a first match the check refuses, for one that only its
+                    // residual makes suspect: that one would stand.
+                    if f.share > fit.share && (!is_poor(f, level) || rescues_refused(fit, f, level))
+                    {
                         result = again;
                         fit = f;
                         check.recovered = true;

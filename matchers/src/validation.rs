@@ -48,7 +48,9 @@ pub struct ValidationParams {
     pub max_share_drop: f64,
     /// A match is also suspect when its residual correlation distance exceeds this many times
     /// the running median residual: a match turned by a few degrees in clutter can keep most
-    /// points near some surface, but not near the ones they belong to. Default 2.
+    /// points near some surface, but not near the ones they belong to. Suspect, not refused:
+    /// a search's re-match above it still replaces a first match the check refuses
+    /// ([`rescues_refused`]). Default 2.
     pub max_residual_ratio: f64,
     /// A match is also suspect when it is left with more than this fraction fewer pairs
     /// than the running median of recent matches (0: off): too few inliers. A scan
@@ -193,6 +195,21 @@ fn odometry_chi2(lambda: &Matrix3<f64>, predicted: &Pose2, matched: &Pose2) -> f
 pub fn is_poor(fit: Fit, level: Option<Level>) -> bool {
     level.is_some_and(|l| {
         fit.share < l.min_share || fit.residual > l.max_residual || fit.pairs < l.min_pairs
+    })
+}
+
+/// True when a search's re-match `again` replaces a first match `first` that `level` refuses
+/// (its share below the level's) although `again` is poor: `again` holds the level's share
+/// and pairs, and only its residual is above the level. A residual above the level makes a
+/// match suspect, never refused ([`Validator::refuse`]): `again` would stand where `first`
+/// falls. (On the MIT CSAIL log odometry caught up after a stall 16° beyond the turn the
+/// scans saw; q-wsm's match from there explained 0.19 of the scan, the search's re-match
+/// 0.99 with 229 pairs against a level of 171, but a residual of about twice the running
+/// median, as a fast turn's skewed scan leaves, and the record kept the prediction.)
+#[must_use]
+pub fn rescues_refused(first: Fit, again: Fit, level: Option<Level>) -> bool {
+    level.is_some_and(|l| {
+        first.share < l.min_share && again.share >= l.min_share && again.pairs >= l.min_pairs
     })
 }
 
