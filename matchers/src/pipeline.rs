@@ -501,6 +501,10 @@ struct OdometryRun {
     /// Whether a match since then disagreed with odometry beyond its uncertainty
     /// ([`Validator::disagrees`]): the scans saw the robot move where odometry read none.
     contradicted: bool,
+    /// Whether a match of the run, its first record's included, was refused: the motion the
+    /// matches followed over the run is then not to be weighed against a new reading
+    /// ([`Pipeline::restart_base`]).
+    refused: bool,
 }
 
 impl OdometryRun {
@@ -513,7 +517,7 @@ impl OdometryRun {
     fn follow(
         run: &mut Option<Self>,
         fresh: bool,
-        contradicted: bool,
+        (contradicted, refused): (bool, bool),
         laser: Pose2,
         correction: Option<Pose2>,
     ) {
@@ -523,11 +527,13 @@ impl OdometryRun {
                     run.start = c * run.start;
                 }
                 run.contradicted |= contradicted;
+                run.refused |= refused;
             }
             _ => {
                 *run = Some(Self {
                     start: laser,
                     contradicted: false,
+                    refused,
                 });
             }
         }
@@ -806,6 +812,32 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         }
     }
 
+    /// Where the first new reading after a stall is applied from ([`MotionModel::stall_restart`]):
+    /// the pose where the stall began, if the reading caught up with the whole motion since,
+    /// or the previous pose (`laser`), if it holds only its own record's motion, as where the
+    /// reading jumped ahead first and then stalled (the MIT CSAIL log played backwards reads
+    /// each catch-up before its stall). The matches tell them apart: caught up, the reading's
+    /// `step` exceeds the motion they followed over the stall by one record's motion; jumped
+    /// ahead, it is one record's motion. The nearer of the two under the motion model's
+    /// information for the step; the stall's start where they tie, where the model gives no
+    /// information, or where a match of the run was refused (the motion followed is then no
+    /// measure: a refused first match that stands may lie on an alias of the scene).
+    fn restart_base(&self, run: &OdometryRun, laser: Pose2, step: &Pose2) -> Pose2 {
+        let Some(lambda) = self.motion.information(step).filter(|_| !run.refused) else {
+            return run.start;
+        };
+        let chi2 = |d: Pose2| {
+            let r = qicp_core::Vector3::new(d.x, d.y, qicp_core::normalize_angle(d.theta));
+            r.dot(&(lambda * r))
+        };
+        let followed = run.start.between(&laser);
+        if chi2(followed.between(step)) <= chi2(*step) {
+            run.start
+        } else {
+            laser
+        }
+    }
+
     /// The share of the scan `local` at `pose` the reference explains, of the points it could
     /// have seen ([`ValidationParams::skip_unseen`]); from `placed`'s look-ups where it was
     /// placed at `pose`.
@@ -999,7 +1031,7 @@ where
                 let step = self.calibration.correct(&raw);
                 let base = match self.run {
                     Some(run) if fresh && run.contradicted && self.motion.stall_restart => {
-                        run.start
+                        self.restart_base(&run, laser, &step)
                     }
                     _ => laser,
                 };
@@ -1117,7 +1149,13 @@ where
         }
         // In the world: the corrected laser pose times the inverse of the match's.
         let correction = check.reanchored.then(|| laser * matched.inverse());
-        OdometryRun::follow(&mut self.run, fresh, contradicted, laser, correction);
+        OdometryRun::follow(
+            &mut self.run,
+            fresh,
+            (contradicted, check.refused),
+            laser,
+            correction,
+        );
         // The motion as matched, where the match stands and something vouches for it: it
         // passed the check, or odometry that moves weighed it and did not contradict it (a
         // fast turn's matches keep too few pairs for the level, and a stall right after must
@@ -1185,15 +1223,21 @@ mod tests {
     fn a_reanchoring_during_a_stall_moves_the_stall_start_with_it() {
         let start = Pose2::new(1.0, 0.0, 0.0);
         let mut run = None;
-        OdometryRun::follow(&mut run, true, false, start, None);
+        OdometryRun::follow(&mut run, true, (false, false), start, None);
         // The reading repeats and a match contradicts it: the stall's run holds on.
-        OdometryRun::follow(&mut run, false, true, Pose2::new(1.3, 0.0, 0.0), None);
+        OdometryRun::follow(
+            &mut run,
+            false,
+            (true, false),
+            Pose2::new(1.3, 0.0, 0.0),
+            None,
+        );
         assert!(run.is_some_and(|r| r.contradicted && r.start == start));
         // A re-anchoring with the reading still repeated: the match at (1.6, 0) is moved to
         // (1.9, 0.2) turned by 0.05 rad, and the stall's start moves by the same correction.
         let (matched, corrected) = (Pose2::new(1.6, 0.0, 0.0), Pose2::new(1.9, 0.2, 0.05));
         let correction = corrected * matched.inverse();
-        OdometryRun::follow(&mut run, false, false, corrected, Some(correction));
+        OdometryRun::follow(&mut run, false, (false, false), corrected, Some(correction));
         let moved = run.map(|r| r.start).expect("a run");
         // The stall's start keeps its place relative to the match: 0.6 m behind it.
         let behind = moved.between(&corrected);
@@ -1203,7 +1247,13 @@ mod tests {
         );
         assert!(run.is_some_and(|r| r.contradicted));
         // A fresh reading starts a new run.
-        OdometryRun::follow(&mut run, true, false, Pose2::new(2.5, 0.2, 0.05), None);
+        OdometryRun::follow(
+            &mut run,
+            true,
+            (false, false),
+            Pose2::new(2.5, 0.2, 0.05),
+            None,
+        );
         assert!(run.is_some_and(|r| !r.contradicted && r.start.x == 2.5));
     }
 }
