@@ -14,6 +14,14 @@ use qicp_matchers::{
     Validator, Wsm, WsmParams,
 };
 
+/// The boosted matchers and the scan-to-scan ones they boost.
+const BOOSTED_AND_PLAIN: [MatcherKind; 4] = [
+    MatcherKind::QWsm,
+    MatcherKind::QIdc,
+    MatcherKind::Wsm,
+    MatcherKind::Idc,
+];
+
 /// The robot's pose at scan `k`: along the room, turning slowly.
 fn truth(k: usize) -> Pose2 {
     Pose2::new(
@@ -888,12 +896,7 @@ fn a_stalled_odometry_reading_that_catches_up_is_not_counted_twice() {
     );
     // IDC drops a prior that explains the scan badly, and a scan-to-scan reference is
     // replaced by the stalled scans: they recover either way, and must with the restart too.
-    for kind in [
-        MatcherKind::QWsm,
-        MatcherKind::QIdc,
-        MatcherKind::Wsm,
-        MatcherKind::Idc,
-    ] {
+    for kind in BOOSTED_AND_PLAIN {
         let restarted = stalled_turn_heading_error(MatcherConfig::defaults(kind));
         assert!(
             restarted < 1.0,
@@ -929,12 +932,7 @@ fn a_reading_that_jumped_ahead_before_its_stall_is_applied_to_the_previous_pose(
     // prediction lay four scans (46°) behind, and q-wsm, q-idc and idc ended 57°, 31° and 33°
     // off (MIT CSAIL played backwards lost 45° and 40° so). The matches over the stall tell
     // which reading it was.
-    for kind in [
-        MatcherKind::QWsm,
-        MatcherKind::QIdc,
-        MatcherKind::Wsm,
-        MatcherKind::Idc,
-    ] {
+    for kind in BOOSTED_AND_PLAIN {
         let worst = jumped_ahead_heading_error(MatcherConfig::defaults(kind));
         assert!(
             worst < 3.0,
@@ -996,12 +994,7 @@ fn a_stall_after_a_turn_whose_matches_stood_unchecked_is_predicted_at_that_turn(
     // not contradicted, those matches give the stall its velocity. Predicted at the right
     // turn's 15° a scan, this drive's stall lay 30° off: every matcher lost it (49-90° off)
     // before the rule.
-    for kind in [
-        MatcherKind::QWsm,
-        MatcherKind::QIdc,
-        MatcherKind::Wsm,
-        MatcherKind::Idc,
-    ] {
+    for kind in BOOSTED_AND_PLAIN {
         let (worst, unchecked) = stall_after_a_turn_no_match_passed(MatcherConfig::defaults(kind));
         println!("{kind}: worst heading error {worst:.2}° after {unchecked} unchecked matches");
         assert!(
@@ -1046,12 +1039,7 @@ fn a_log_without_odometry_is_followed_at_the_matched_velocity() {
     }
     // IDC's matching-range rule does not reach 15° from a standing start (q-idc 50°, idc 21°
     // either way); at 8° a scan every matcher follows the turn.
-    for kind in [
-        MatcherKind::QWsm,
-        MatcherKind::QIdc,
-        MatcherKind::Wsm,
-        MatcherKind::Idc,
-    ] {
+    for kind in BOOSTED_AND_PLAIN {
         let error = turn_without_odometry(MatcherConfig::defaults(kind), 8.0);
         assert!(
             error < 1.0,
@@ -1572,12 +1560,7 @@ fn a_refused_match_is_replaced_by_a_recovery_whose_only_fault_is_its_residual() 
     // never refused; the re-match was thrown away for it all the same, and the record kept
     // the prediction, 16° off. Here every matcher kept the prediction, 20° off, before the
     // rule.
-    for kind in [
-        MatcherKind::QWsm,
-        MatcherKind::QIdc,
-        MatcherKind::Wsm,
-        MatcherKind::Idc,
-    ] {
+    for kind in BOOSTED_AND_PLAIN {
         let (off, recovered) = slip_onto_a_scan_that_fits_loosely(kind);
         assert!(
             recovered,
