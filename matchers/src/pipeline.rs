@@ -294,8 +294,8 @@ pub struct MotionModel {
     /// ahead first and then stalled (a log played backwards) holds only its own record's
     /// motion and is applied to the previous pose; the motion the matches followed over the
     /// stall tells the two apart. false applies every step to the previous pose. Default
-    /// true. (The MIT CSAIL log stalls three times for four
-    /// records and then jumps by up to 0.94 m and 85.5°; see the README.)
+    /// true. (The MIT CSAIL log stalls three times for four records and then jumps by up to
+    /// 0.94 m and 85.5°; see the README.)
     pub stall_restart: bool,
     /// Where odometry repeats one reading while the matches saw the robot move (as for
     /// `stall_restart`), the repeated reading holds no motion: the stall's further records

@@ -586,6 +586,30 @@ mod tests {
     }
 
     #[test]
+    fn a_refused_match_is_rescued_only_by_one_whose_only_fault_is_its_residual() {
+        let level = Some(Level {
+            min_share: 0.75,
+            max_residual: 0.02,
+            min_pairs: 80.0,
+        });
+        let refused = fit(0.2, 0.01);
+        let loose = fit(0.99, 0.03);
+        assert!(is_poor(loose, level));
+        assert!(rescues_refused(refused, loose, level));
+        // A first match that stands is not traded for a poor one.
+        assert!(!rescues_refused(fit(0.8, 0.03), loose, level));
+        // Too small a share, or too few pairs, is no rescue.
+        assert!(!rescues_refused(refused, fit(0.7, 0.01), level));
+        let few = Fit {
+            pairs: 60.0,
+            ..loose
+        };
+        assert!(!rescues_refused(refused, few, level));
+        // Without a level nothing is refused, and nothing rescued.
+        assert!(!rescues_refused(refused, loose, None));
+    }
+
+    #[test]
     fn a_validator_built_with_no_history_keeps_a_bounded_one_that_sets_a_level() {
         // Built directly, the parameters are not validated: a history of 0 once let the fits
         // pile up without bound, and one below five never set a level.
