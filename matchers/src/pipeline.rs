@@ -9,7 +9,8 @@ use crate::policy::{MapPolicy, Matched, ReferencePolicy, ReferenceStore, ScanPol
 use crate::revisit::{Revisit, RevisitParams};
 use crate::trail::{Amendment, Trail, moves_fit};
 use crate::validation::{
-    Check, FieldOfView, Fit, Placed, ValidationParams, Validator, is_poor, rescues_refused,
+    Check, FieldOfView, Fit, Placed, ValidationParams, Validator, is_poor, odometry_chi2,
+    rescues_refused,
 };
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
@@ -829,10 +830,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         let Some(lambda) = self.motion.information(step).filter(|_| !run.refused) else {
             return run.start;
         };
-        let chi2 = |d: Pose2| {
-            let r = qicp_core::Vector3::new(d.x, d.y, qicp_core::normalize_angle(d.theta));
-            r.dot(&(lambda * r))
-        };
+        // A motion's χ² from none at all.
+        let chi2 = |d: Pose2| odometry_chi2(&lambda, &Pose2::IDENTITY, &d);
         let followed = run.start.between(&laser);
         if chi2(followed.between(step)) <= chi2(*step) {
             run.start

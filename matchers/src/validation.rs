@@ -179,7 +179,7 @@ impl ValidationParams {
 
 /// The squared Mahalanobis distance of `matched` from `predicted` under the prior information
 /// `lambda` (both poses in the reference frame).
-fn odometry_chi2(lambda: &Matrix3<f64>, predicted: &Pose2, matched: &Pose2) -> f64 {
+pub(crate) fn odometry_chi2(lambda: &Matrix3<f64>, predicted: &Pose2, matched: &Pose2) -> f64 {
     let d = Vector3::new(
         matched.x - predicted.x,
         matched.y - predicted.y,

@@ -22,6 +22,18 @@ const BOOSTED_AND_PLAIN: [MatcherKind; 4] = [
     MatcherKind::Idc,
 ];
 
+/// Asserts that each of [`BOOSTED_AND_PLAIN`] at its defaults keeps the worst heading error
+/// `heading_error` measures after a stall below `bound_deg`.
+fn each_stays_within(bound_deg: f64, heading_error: impl Fn(MatcherConfig) -> f64) {
+    for kind in BOOSTED_AND_PLAIN {
+        let worst = heading_error(MatcherConfig::defaults(kind));
+        assert!(
+            worst < bound_deg,
+            "{kind}: worst heading error {worst:.2}° after the stall"
+        );
+    }
+}
+
 /// The robot's pose at scan `k`: along the room, turning slowly.
 fn truth(k: usize) -> Pose2 {
     Pose2::new(
@@ -36,19 +48,17 @@ fn record(k: usize, odometry: Pose2) -> Record {
 }
 
 fn record_in(world: &SyntheticWorld, k: usize, odometry: Pose2) -> Record {
-    let mut scan = world.scan(&truth(k), 0.005, k as u64 + 1);
-    scan.timestamp = k as f64;
-    Record {
-        scan,
-        odometry,
-        truth: Some(truth(k)),
-        laser_offset: Pose2::IDENTITY,
-    }
+    record_at(world, &truth(k), k, odometry)
 }
 
 /// Scan `k` of the room seen from `pose` (its noise seeded by `k`), read with `odometry`.
 fn room_record_at(pose: &Pose2, k: usize, odometry: Pose2) -> Record {
-    let mut scan = SyntheticWorld::room().scan(pose, 0.005, k as u64 + 1);
+    record_at(&SyntheticWorld::room(), pose, k, odometry)
+}
+
+/// Scan `k` of `world` seen from `pose` (its noise seeded by `k`), read with `odometry`.
+fn record_at(world: &SyntheticWorld, pose: &Pose2, k: usize, odometry: Pose2) -> Record {
+    let mut scan = world.scan(pose, 0.005, k as u64 + 1);
     scan.timestamp = k as f64;
     Record {
         scan,
@@ -896,13 +906,7 @@ fn a_stalled_odometry_reading_that_catches_up_is_not_counted_twice() {
     );
     // IDC drops a prior that explains the scan badly, and a scan-to-scan reference is
     // replaced by the stalled scans: they recover either way, and must with the restart too.
-    for kind in BOOSTED_AND_PLAIN {
-        let restarted = stalled_turn_heading_error(MatcherConfig::defaults(kind));
-        assert!(
-            restarted < 1.0,
-            "{kind}: worst heading error {restarted:.2}° after the stall"
-        );
-    }
+    each_stays_within(1.0, stalled_turn_heading_error);
 }
 
 /// `config` over the fast turn of [`turning`] through the corridor, whose odometry jumps
@@ -912,16 +916,7 @@ fn a_stalled_odometry_reading_that_catches_up_is_not_counted_twice() {
 fn jumped_ahead_heading_error(config: MatcherConfig) -> f64 {
     let world = SyntheticWorld::corridor();
     let read = |k| if (10..15).contains(&k) { 15 } else { k };
-    let record = |k: usize| {
-        let mut scan = world.scan(&turning(k), 0.005, k as u64 + 1);
-        scan.timestamp = k as f64;
-        Record {
-            scan,
-            odometry: turning(read(k)),
-            truth: Some(turning(k)),
-            laser_offset: Pose2::IDENTITY,
-        }
-    };
+    let record = |k| record_at(&world, &turning(k), k, turning(read(k)));
     worst_heading_error_of(config, turning, record, 16, |_, _| {})
 }
 
@@ -932,13 +927,7 @@ fn a_reading_that_jumped_ahead_before_its_stall_is_applied_to_the_previous_pose(
     // prediction lay four scans (46°) behind, and q-wsm, q-idc and idc ended 57°, 31° and 33°
     // off (MIT CSAIL played backwards lost 45° and 40° so). The matches over the stall tell
     // which reading it was.
-    for kind in BOOSTED_AND_PLAIN {
-        let worst = jumped_ahead_heading_error(MatcherConfig::defaults(kind));
-        assert!(
-            worst < 3.0,
-            "{kind}: worst heading error {worst:.2}° after the stall"
-        );
-    }
+    each_stays_within(3.0, jumped_ahead_heading_error);
 }
 
 /// The robot's pose at scan `k` of a drive in the room that turns right at 15° a scan until
