@@ -113,6 +113,20 @@ const MAX_CELL_SIZE: f64 = 1e3;
 /// enough that the window's arithmetic cannot overflow.
 const MAX_WINDOW_SCANS: usize = 1_000_000;
 
+/// Two odometry readings this close (m, and rad) are the same reading: a wheel that did not
+/// turn. A stall repeats its reading exactly in a log as written, but readings recomposed
+/// from increments (the sweep's perturbed odometry, a transform chain) keep rounding noise
+/// of about 1e-13 m where the wheels stood. A CARMEN log writes micrometres, and a robot
+/// that moves at all moves farther than this in one record.
+const SAME_READING: f64 = 1e-8;
+
+/// Whether `a` and `b` are one odometry reading up to rounding ([`SAME_READING`]).
+fn same_reading(a: &Pose2, b: &Pose2) -> bool {
+    (a.x - b.x).abs() <= SAME_READING
+        && (a.y - b.y).abs() <= SAME_READING
+        && qicp_core::normalize_angle(a.theta - b.theta).abs() <= SAME_READING
+}
+
 /// The default cell cap ([`Relevance::max_cell_points`]): the points two surfaces sampled at
 /// `resolution` (m) put into a square cell of side `cell_size` when both cross it along its
 /// diagonal, ⌈2√2 · `cell_size` / `resolution`⌉. 0 (no cap) where the map keeps every point
@@ -287,8 +301,10 @@ pub struct MotionModel {
     /// robustness section: it helps there and hurts q-wsm in the simulated park, whose slip
     /// is not a fixed bias).
     pub calibration_m: f64,
-    /// Where odometry repeated one reading over several records while the matches saw the
-    /// robot move (they disagreed with it beyond its uncertainty), the first new reading is
+    /// Where odometry repeated one reading over several records (to within rounding: the
+    /// readings of a perturbed or transformed copy of a log keep noise of 1e-13 m where the
+    /// wheels stood) while the matches saw the robot move (they disagreed with it beyond its
+    /// uncertainty), the first new reading is
     /// applied to the pose of the repeat's first record, not to the previous one: a reading
     /// that stalled and then caught up holds the whole motion since the stall began, and the
     /// matches during the stall have followed part of it already. A reading that jumped
@@ -1007,9 +1023,11 @@ where
         let offset = record.laser_offset;
         // The odometry motion since the previous record, as a motion of the laser.
         // Corrected by the calibration fitted so far: the prediction and the prior's centre.
-        let fresh = self.last.is_none_or(|(odom, _)| record.odometry != odom);
+        let fresh = self
+            .last
+            .is_none_or(|(odom, _)| !same_reading(&record.odometry, &odom));
         let first_reading = *self.first_reading.get_or_insert(record.odometry);
-        self.odometry_moved |= record.odometry != first_reading;
+        self.odometry_moved |= !same_reading(&record.odometry, &first_reading);
         // A reading repeated while the matches saw the robot move holds no motion: the record
         // is predicted at the last checked velocity, without odometry's prior.
         let stalled =

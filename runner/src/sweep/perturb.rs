@@ -54,13 +54,23 @@ pub fn capped_range(scan: &Scan, max_range: f64) -> Result<Scan, ScanError> {
 
 /// The odometry poses with every increment `poses[i-1].between(&poses[i])` (robot frame)
 /// passed through `perturb` and recomposed from the first pose, so that a perturbation of one
-/// increment carries into every later pose, as drift does.
+/// increment carries into every later pose, as drift does. A reading that repeats the one
+/// before (wheels that did not turn; a stall) repeats in the copy too, exactly: recomposed,
+/// its zero increment would leave rounding noise that no longer reads as a repeat.
 pub fn perturb_increments(poses: &[Pose2], mut perturb: impl FnMut(Pose2) -> Pose2) -> Vec<Pose2> {
     let mut out = Vec::with_capacity(poses.len());
     let mut current = None::<Pose2>;
     for (i, pose) in poses.iter().enumerate() {
         let next = match (current, i.checked_sub(1)) {
-            (Some(c), Some(prev)) => c.compose(&perturb(poses[prev].between(pose))),
+            (Some(c), Some(prev)) => {
+                // Drawn for every increment, so that a repeat leaves the later draws alone.
+                let step = perturb(poses[prev].between(pose));
+                if poses[prev] == *pose {
+                    c
+                } else {
+                    c.compose(&step)
+                }
+            }
             _ => *pose,
         };
         out.push(next);

@@ -151,6 +151,28 @@ fn perturbed_odometry_starts_at_the_first_pose_and_keeps_it_unperturbed() {
 }
 
 #[test]
+fn a_stall_repeats_its_reading_exactly_in_perturbed_odometry() {
+    // Readings as a CARMEN log holds them (MIT CSAIL's first stall): far from the origin,
+    // turned, and repeated for four records before a catch-up.
+    let start = Pose2::new(574.078178, -2.712098, 2.884097);
+    let mut path: Vec<Pose2> = straight(1.0, 5).iter().map(|p| start.compose(p)).collect();
+    let stall = path.last().copied().unwrap_or_default();
+    path.extend([stall; 4]);
+    path.push(stall.compose(&Pose2::new(0.8, 0.2, 0.87)));
+    let mut rng = ChaCha8Rng::seed_from_u64(SEED);
+    for perturbed in [
+        perturb_increments(&path, biased_increment),
+        perturb_increments(&path, |d| noisy_increment(d, &mut rng)),
+    ] {
+        assert!(
+            perturbed[6..10].iter().all(|p| *p == perturbed[5]),
+            "{perturbed:?}"
+        );
+        assert_ne!(perturbed[10], perturbed[5]);
+    }
+}
+
+#[test]
 fn odometry_noise_is_deterministic_for_a_seed_and_drifts() {
     let r = records(&straight(5.0, 50));
     let a = InputVariant::OdometryNoise.apply(&r).expect("applies");
