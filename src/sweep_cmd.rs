@@ -21,12 +21,15 @@ pub struct SweepArgs {
     pub config: Option<PathBuf>,
     /// Freiburg relations file every run is scored with. Without it every variant is scored
     /// against the default run: relations drawn along the default's trajectory (a segment
-    /// per metre or 30°), so the figures are disagreements with the default, not errors.
+    /// per metre or 30°, and its revisits of a place; see `--reference`), so the figures are
+    /// disagreements with the default, not errors.
     #[arg(long)]
     pub relations: Option<PathBuf>,
     /// Score every run against this trajectory of the log instead (TUM: another matcher's or
-    /// a SLAM system's): relations drawn along it, a segment per metre or 30°, so that a log
-    /// without relations is swept against a trajectory you trust, not against the default.
+    /// a SLAM system's): relations drawn along it, a segment per metre or 30° and a revisit
+    /// wherever it comes back within a metre of where it was a minute or more before, so
+    /// that a log without relations is swept against a trajectory you trust, not against the
+    /// default.
     #[arg(long, value_name = "TUM", conflicts_with = "relations")]
     pub reference: Option<PathBuf>,
     /// Print the report as JSON on stdout (progress stays on stderr).

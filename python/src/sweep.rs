@@ -100,7 +100,7 @@ fn write_drawn_relations<T>(
 /// The default run of a sweep on a log without relations, as `qicp sweep LOG` (no
 /// `--relations`) makes it: the matcher as configured on the log's first `scans` records, and
 /// the relations drawn along its trajectory (a segment per metre driven or 30° turned, on the
-/// records every variant keeps), written to `out` in the Freiburg format, renamed into place
+/// records every variant keeps, and its revisits of a place), written to `out` in the Freiburg format, renamed into place
 /// when complete. Returns the default's figures (scored against them: no error). The
 /// variants are then `sweep_run(log, out, name)` and the report
 /// `sweep_report(log, out, results, against_default=True)`.
@@ -133,8 +133,9 @@ pub(crate) fn sweep_relations<'py>(
 }
 
 /// The relations of a sweep scored against a reference trajectory of the log (TUM), as
-/// `qicp sweep LOG --reference TUM` draws them: a segment per metre driven or 30° turned along
-/// the reference's poses nearest the records every variant keeps among the log's first `scans`.
+/// `qicp sweep LOG --reference TUM` draws them: a segment per metre driven or 30° turned, and
+/// its revisits of a place, along the reference's poses nearest the records every variant
+/// keeps among the log's first `scans`.
 /// Writes them to `out` in the Freiburg format, renamed into place when complete, and returns
 /// how many there are. Every run, the default's too, is then `sweep_run(log, out, name)` and
 /// the report `sweep_report(log, out, results, reference=reference)`.

@@ -31,6 +31,7 @@ use qicp_matchers::MatcherConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
+use std::collections::HashMap;
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -113,8 +114,8 @@ pub struct SweepReport {
     /// The reference trajectory's file, when the runs are scored against one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference: Option<String>,
-    /// Relations in the relations file (against the default run: the segments drawn along
-    /// its trajectory).
+    /// Relations in the relations file (against the default run or a reference trajectory:
+    /// the segments and revisits drawn along it, [`relations_along`]).
     pub relations_total: usize,
     /// The run with the configuration as given.
     pub default: RunFigures,
@@ -333,7 +334,8 @@ pub fn table(report: &SweepReport) -> String {
         let _ = writeln!(
             out,
             "{} on {} ({} scans), scored against the reference trajectory {}: its motion over \
-             {} segments of {SEGMENT_M} m or 30°; errors are disagreements with it",
+             {} relations (segments of {SEGMENT_M} m or 30°, and revisits {REVISIT_GAP_S} s \
+             or more apart within {REVISIT_M} m); errors are disagreements with it",
             report.matcher,
             report.log,
             report.scans,
@@ -344,7 +346,8 @@ pub fn table(report: &SweepReport) -> String {
         let _ = writeln!(
             out,
             "{} on {} ({} scans), scored against the default run: its motion over {} \
-             segments of {SEGMENT_M} m or 30°; errors are disagreements with it",
+             relations (segments of {SEGMENT_M} m or 30°, and revisits {REVISIT_GAP_S} s or \
+             more apart within {REVISIT_M} m); errors are disagreements with it",
             report.matcher, report.log, report.scans, report.relations_total
         );
     }
@@ -518,7 +521,7 @@ impl SweepInput {
     /// A sweep scored against a reference trajectory of the log (TUM; another matcher's, a
     /// SLAM system's): relations drawn along its poses nearest the records every variant
     /// keeps, as [`relations_along`] draws them, a segment per [`SEGMENT_M`] or
-    /// [`SEGMENT_RAD`]. For a log without relations whose trusted trajectory is not the
+    /// [`SEGMENT_RAD`] and the revisits. For a log without relations whose trusted trajectory is not the
     /// default run's: every run, the default's too, is scored by how far its motion disagrees
     /// with the reference's, and the ratios say what each variant costs. Streams the log once
     /// to count its records.
@@ -573,8 +576,8 @@ impl SweepInput {
     /// A sweep of a log without relations (CARMEN read as `carmen` says, or a bag): every
     /// variant is scored against the default run instead, with relations drawn along the
     /// default's own trajectory ([`relations_along`]): a variant's `trans_mean` is then how
-    /// far its motion disagrees with the default's over each segment of about a metre, not
-    /// an error against the truth. A matcher that holds on a log agrees with itself under
+    /// far its motion disagrees with the default's over each segment of about a metre and
+    /// between the default's revisits of a place, not an error against the truth. A matcher that holds on a log agrees with itself under
     /// small changes; a fragile one does not. Streams the log once to count its records.
     pub fn against_default(
         log: &Path,
@@ -687,10 +690,23 @@ fn nearest_within(trajectory: &[Stamped], t: f64, max_dt: f64) -> Option<&Stampe
         .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
 }
 
+/// A revisit of [`relations_along`] joins poses at least this far apart in time (s)…
+pub const REVISIT_GAP_S: f64 = 60.0;
+/// … and at most this far apart in space (m).
+pub const REVISIT_M: f64 = 1.0;
+/// Every this-many-th pose of the trajectory is tried for a revisit.
+pub const REVISIT_STRIDE: usize = 10;
+
 /// Relations along a trajectory (time order): a chain of segments, each from a pose to the
 /// first later one that moved [`SEGMENT_M`] or turned [`SEGMENT_RAD`] from it, holding the
-/// trajectory's own motion over the segment. Scored against them, the trajectory itself has
-/// no error; another run of the same log has the error of its motion where it disagrees.
+/// trajectory's own motion over the segment; then the revisits, each from one of every
+/// [`REVISIT_STRIDE`]-th poses to the nearest earlier such pose (the latest of equals) at
+/// least [`REVISIT_GAP_S`] older within [`REVISIT_M`] of it (one a pose, so that a long wait in one place cannot
+/// outnumber the drive). Scored against them, the trajectory itself has no error; another
+/// run of the same log has the error of its motion where it disagrees. The segments see a
+/// run disagree over about a metre; the revisits, as the Freiburg benchmark's relations
+/// between poses far apart in time do, see a heading lost once and never regained, which
+/// the chain counts on one segment only.
 #[must_use]
 pub fn relations_along(trajectory: &[(f64, Pose2)]) -> Vec<Relation> {
     let mut relations = Vec::new();
@@ -703,6 +719,52 @@ pub fn relations_along(trajectory: &[(f64, Pose2)]) -> Vec<Relation> {
             relations.push(Relation { t1, t2, delta });
             (t1, from) = (t2, to);
         }
+    }
+    relations.extend(revisits_along(trajectory));
+    relations
+}
+
+/// The revisits of [`relations_along`], in the order of their later pose.
+fn revisits_along(trajectory: &[(f64, Pose2)]) -> Vec<Relation> {
+    let cell = |p: &Pose2| {
+        // Saturating casts: a pose far out only shares its cell with its neighbours there.
+        (
+            (p.x / REVISIT_M).floor() as i64,
+            (p.y / REVISIT_M).floor() as i64,
+        )
+    };
+    let mut cells: HashMap<(i64, i64), Vec<Stamped>> = HashMap::new();
+    let mut relations = Vec::new();
+    for &(t2, to) in trajectory.iter().step_by(REVISIT_STRIDE) {
+        if !(t2.is_finite() && to.x.is_finite() && to.y.is_finite()) {
+            continue;
+        }
+        let (cx, cy) = cell(&to);
+        let mut nearest: Option<(f64, Stamped)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                let Some(earlier) = cells.get(&(cx.saturating_add(dx), cy.saturating_add(dy)))
+                else {
+                    continue;
+                };
+                for &(t1, from) in earlier {
+                    let d = from.distance(&to);
+                    let better =
+                        nearest.is_none_or(|(best, (tb, _))| d < best || (d == best && t1 > tb));
+                    if t2 - t1 >= REVISIT_GAP_S && d <= REVISIT_M && better {
+                        nearest = Some((d, (t1, from)));
+                    }
+                }
+            }
+        }
+        if let Some((_, (t1, from))) = nearest {
+            relations.push(Relation {
+                t1,
+                t2,
+                delta: from.between(&to),
+            });
+        }
+        cells.entry((cx, cy)).or_default().push((t2, to));
     }
     relations
 }

@@ -388,6 +388,62 @@ fn relations_along_a_trajectory_hold_its_own_motion_per_metre_or_30_degrees() {
     assert!(relations_along(&[]).is_empty());
 }
 
+/// A 10 m square driven `laps` times at 0.1 m a second, a pose a second.
+fn square_laps(laps: usize) -> Vec<Stamped> {
+    let corners = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)];
+    let mut out = Vec::new();
+    for _ in 0..laps {
+        for (side, (x, y)) in corners.into_iter().enumerate() {
+            let heading = side as f64 * std::f64::consts::FRAC_PI_2;
+            for i in 0..100 {
+                let d = 0.1 * f64::from(i);
+                let t = out.len() as f64;
+                let pose = Pose2::new(x + d * heading.cos(), y + d * heading.sin(), heading);
+                out.push((t, pose));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_heading_lost_once_is_caught_by_the_revisits_not_by_the_segments() {
+    // Three laps of a square, 400 s each: every pose after the first lap comes back within a
+    // metre of one 400 s older.
+    let truth = square_laps(3);
+    let relations = relations_along(&truth);
+    let revisits: Vec<&Relation> = relations.iter().filter(|r| r.t2 - r.t1 >= 60.0).collect();
+    assert!(revisits.len() >= 70, "{} revisits", revisits.len());
+    // One a pose, from the nearest earlier pose: after the first lap, the same place of the
+    // lap before (the first lap's end comes back near its start).
+    assert!(
+        revisits
+            .iter()
+            .filter(|r| r.t2 >= 400.0)
+            .all(|r| (r.t2 - r.t1 - 400.0).abs() < 1e-9 && r.delta.translation().norm() < 1e-9)
+    );
+    assert_eq!(scored(&truth, &relations).trans_max, 0.0);
+    // A run that turns 40° at once half-way and follows the truth's motion after: one bad
+    // match, its map turned with it.
+    let at = truth.len() / 2;
+    let pivot = truth[at].1;
+    let turn = pivot * Pose2::new(0.0, 0.0, 40f64.to_radians()) * pivot.inverse();
+    let lost: Vec<Stamped> = truth
+        .iter()
+        .enumerate()
+        .map(|(i, (t, p))| (*t, if i < at { *p } else { turn * *p }))
+        .collect();
+    // The chain alone sees it on one segment of about 120: a centimetre on the mean.
+    let chain: Vec<Relation> = relations
+        .iter()
+        .filter(|r| r.t2 - r.t1 < 60.0)
+        .cloned()
+        .collect();
+    assert!(scored(&lost, &chain).trans_mean < 0.02);
+    // The revisits across the turn disagree by metres.
+    assert!(scored(&lost, &relations).trans_mean > 1.0);
+}
+
 /// Figures of `poses` (at times 0, 1, 2, …) scored with `relations`.
 fn scored(poses: &[(f64, Pose2)], relations: &[Relation]) -> RunFigures {
     let mut figures = RunFigures {
