@@ -914,8 +914,8 @@ fn a_stalled_reading_that_carries_rounding_noise_is_still_a_stall() {
     // The sweep's perturbed odometry recomposes every increment, and a stall's zero
     // increments came out as readings a few 1e-13 m apart: read as motion, the catch-up
     // was applied to the previous pose and MIT CSAIL's `odom-noise` and `odom-bias` runs of
-    // q-wsm lost 44° at its first stall (4.3 and 4.1 m on relations along the default run
-    // with its loops, against 0.017 m).
+    // q-wsm lost 44° at its first stall (4.3 and 4.1 m on relations along q-plicp's run with
+    // its revisits, against 0.017 m).
     let read = |k: usize| {
         if (10..14).contains(&k) {
             let e = 1e-13 * k as f64;

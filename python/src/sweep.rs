@@ -100,9 +100,9 @@ fn write_drawn_relations<T>(
 /// The default run of a sweep on a log without relations, as `qicp sweep LOG` (no
 /// `--relations`) makes it: the matcher as configured on the log's first `scans` records, and
 /// the relations drawn along its trajectory (a segment per metre driven or 30° turned, on the
-/// records every variant keeps, and its revisits of a place), written to `out` in the Freiburg format, renamed into place
-/// when complete. Returns the default's figures (scored against them: no error). The
-/// variants are then `sweep_run(log, out, name)` and the report
+/// records every variant keeps, and its revisits of a place), written to `out` in the
+/// Freiburg format, renamed into place when complete. Returns the default's figures (scored
+/// against them: no error). The variants are then `sweep_run(log, out, name)` and the report
 /// `sweep_report(log, out, results, against_default=True)`.
 #[pyfunction]
 #[pyo3(signature = (log, out, *, matcher = "q-wsm", config = None, scans = None,

@@ -521,10 +521,10 @@ impl SweepInput {
     /// A sweep scored against a reference trajectory of the log (TUM; another matcher's, a
     /// SLAM system's): relations drawn along its poses nearest the records every variant
     /// keeps, as [`relations_along`] draws them, a segment per [`SEGMENT_M`] or
-    /// [`SEGMENT_RAD`] and the revisits. For a log without relations whose trusted trajectory is not the
-    /// default run's: every run, the default's too, is scored by how far its motion disagrees
-    /// with the reference's, and the ratios say what each variant costs. Streams the log once
-    /// to count its records.
+    /// [`SEGMENT_RAD`] and the revisits. For a log without relations whose trusted trajectory
+    /// is not the default run's: every run, the default's too, is scored by how far its
+    /// motion disagrees with the reference's, and the ratios say what each variant costs.
+    /// Streams the log once to count its records.
     pub fn against_trajectory(
         log: &Path,
         reference: &Path,
@@ -577,8 +577,9 @@ impl SweepInput {
     /// variant is scored against the default run instead, with relations drawn along the
     /// default's own trajectory ([`relations_along`]): a variant's `trans_mean` is then how
     /// far its motion disagrees with the default's over each segment of about a metre and
-    /// between the default's revisits of a place, not an error against the truth. A matcher that holds on a log agrees with itself under
-    /// small changes; a fragile one does not. Streams the log once to count its records.
+    /// between the default's revisits of a place, not an error against the truth. A matcher
+    /// that holds on a log agrees with itself under small changes; a fragile one does not.
+    /// Streams the log once to count its records.
     pub fn against_default(
         log: &Path,
         scans: Option<NonZeroUsize>,
@@ -700,13 +701,13 @@ pub const REVISIT_STRIDE: usize = 10;
 /// Relations along a trajectory (time order): a chain of segments, each from a pose to the
 /// first later one that moved [`SEGMENT_M`] or turned [`SEGMENT_RAD`] from it, holding the
 /// trajectory's own motion over the segment; then the revisits, each from one of every
-/// [`REVISIT_STRIDE`]-th poses to the nearest earlier such pose (the latest of equals) at
-/// least [`REVISIT_GAP_S`] older within [`REVISIT_M`] of it (one a pose, so that a long wait in one place cannot
-/// outnumber the drive). Scored against them, the trajectory itself has no error; another
-/// run of the same log has the error of its motion where it disagrees. The segments see a
-/// run disagree over about a metre; the revisits, as the Freiburg benchmark's relations
-/// between poses far apart in time do, see a heading lost once and never regained, which
-/// the chain counts on one segment only.
+/// [`REVISIT_STRIDE`]-th pose to the nearest earlier such pose (the latest of equals) at
+/// least [`REVISIT_GAP_S`] older within [`REVISIT_M`] of it: one a pose, so that a long wait
+/// in one place cannot outnumber the drive. Scored against them, the trajectory itself has
+/// no error; another run of the same log has the error of its motion where it disagrees.
+/// The segments see a run disagree over about a metre; the revisits, as the Freiburg
+/// benchmark's relations between poses far apart in time do, see a heading lost once and
+/// never regained, which the chain counts on one segment only.
 #[must_use]
 pub fn relations_along(trajectory: &[(f64, Pose2)]) -> Vec<Relation> {
     let mut relations = Vec::new();
