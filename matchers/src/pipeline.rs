@@ -304,15 +304,14 @@ pub struct MotionModel {
     /// Where odometry repeated one reading over several records (to within rounding: the
     /// readings of a perturbed or transformed copy of a log keep noise of 1e-13 m where the
     /// wheels stood) while the matches saw the robot move (they disagreed with it beyond its
-    /// uncertainty), the first new reading is
-    /// applied to the pose of the repeat's first record, not to the previous one: a reading
-    /// that stalled and then caught up holds the whole motion since the stall began, and the
-    /// matches during the stall have followed part of it already. A reading that jumped
-    /// ahead first and then stalled (a log played backwards) holds only its own record's
-    /// motion and is applied to the previous pose; the motion the matches followed over the
-    /// stall tells the two apart. false applies every step to the previous pose. Default
-    /// true. (The MIT CSAIL log stalls three times for four records and then jumps by up to
-    /// 0.94 m and 85.5°; see the README.)
+    /// uncertainty), the first new reading is applied to the pose of the repeat's first
+    /// record, not to the previous one: a reading that stalled and then caught up holds the
+    /// whole motion since the stall began, and the matches during the stall have followed
+    /// part of it already. A reading that jumped ahead first and then stalled (a log played
+    /// backwards) holds only its own record's motion and is applied to the previous pose;
+    /// the motion the matches followed over the stall tells the two apart. false applies
+    /// every step to the previous pose. Default true. (The MIT CSAIL log stalls three times
+    /// for four records and then jumps by up to 0.94 m and 85.5°; see the README.)
     pub stall_restart: bool,
     /// Where odometry repeats one reading while the matches saw the robot move (as for
     /// `stall_restart`), the repeated reading holds no motion: the stall's further records
