@@ -10,7 +10,7 @@ use crate::revisit::{Revisit, RevisitParams};
 use crate::trail::{Amendment, Trail, moves_fit};
 use crate::validation::{
     Check, FieldOfView, Fit, Placed, ValidationParams, Validator, is_poor, odometry_chi2,
-    rescues_refused,
+    replaces_without_level, rescues_refused,
 };
 use qicp_core::{
     Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
@@ -743,7 +743,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             Some(_) => return (result, Check::UNCHECKED, false),
         };
         let mut check = Check::UNCHECKED;
-        if self.validator.params.search && is_poor(fit, level) {
+        // After a run of refusals no level judges a match: every one is searched until
+        // matches set a new level.
+        let unleveled = self.validator.restarting();
+        let search_all = unleveled && self.validator.params.search_after_refusals;
+        if self.validator.params.search && (search_all || is_poor(fit, level)) {
             check.searched = true;
             if let Some(start) = self.search.search(&self.reference, local, &guess) {
                 let (again, again_held, again_placed) =
@@ -753,9 +757,25 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     // Only a match that passes the check replaces the first: one poor
                     // match is not traded for another (an aliased corridor, a lone scan).
                     // Except a first match the check refuses, for one that only its
-                    // residual makes suspect: that one would stand.
-                    if f.share > fit.share && (!is_poor(f, level) || rescues_refused(fit, f, level))
-                    {
+                    // residual makes suspect: that one would stand. With no level, the
+                    // re-match must explain clearly more, and odometry must let it pass where
+                    // it lets the first.
+                    let replaces = if search_all {
+                        let vetoed = |pose: &Pose2| {
+                            prior.filter(|_| by_odometry).is_some_and(|lambda| {
+                                self.validator.disagrees(&lambda, &guess, pose)
+                            })
+                        };
+                        replaces_without_level(
+                            &self.validator.params,
+                            (fit, &result.pose),
+                            (f, &again.pose),
+                            vetoed,
+                        )
+                    } else {
+                        !is_poor(f, level) || rescues_refused(fit, f, level)
+                    };
+                    if f.share > fit.share && replaces {
                         result = again;
                         fit = f;
                         check.recovered = true;
@@ -765,7 +785,6 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             }
         }
         let passed = result.fallback.is_none() && level.is_some() && !is_poor(fit, level);
-        let restarting = self.validator.restarting();
         if result.fallback.is_none() {
             self.validator.record(fit);
             check.inlier_share = fit.share;
@@ -783,7 +802,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                     (1.0 - self.validator.params.max_share_drop) * predicted > fit.share
                 }
             };
-            if (check.refused || restarting) && astray(self.share(local, &guess, None)) {
+            if (check.refused || unleveled) && astray(self.share(local, &guess, None)) {
                 result = MatchResult::fallback(guess, Fallback::Refused);
             }
         }
