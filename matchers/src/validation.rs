@@ -76,11 +76,11 @@ pub struct ValidationParams {
     /// no level to judge it that match would enter the map. The search's re-match replaces it
     /// where the match falls more than `max_share_drop` below the re-match's share (which
     /// stands in for the level, as the prediction's does for the fall-back) and where
-    /// odometry's veto (`max_odometry_chi2`) would not withhold the re-match unless it
-    /// withholds the first as well ([`Validator::replaces_without_level`]). false searches
-    /// only poor matches, as before a restart. Default true. (On the MIT CSAIL log with every
-    /// second record, q-wsm's matches after such a run explained 0.27 and 0.44 of their scans
-    /// and entered the map 19° short of the turn; re-matched, 0.48 and 0.89.)
+    /// odometry's χ² test (`max_odometry_chi2`) would not reject the re-match unless it
+    /// rejects the first as well ([`replaces_without_level`]). false searches only poor
+    /// matches, as before a restart. Default true. (On the MIT CSAIL log with every second
+    /// record, a match of q-wsm's after such a run explained 0.42 of its scan and entered the
+    /// map 15° off the turn, 18.6° off to the end; its re-match explains 0.90.)
     pub search_after_refusals: bool,
     /// A match whose pose differs from the odometry prediction by more than this squared
     /// Mahalanobis distance, under the motion model's covariance (`[matcher.motion]`), is
@@ -228,11 +228,11 @@ pub fn rescues_refused(first: Fit, again: Fit, level: Option<Level>) -> bool {
 
 /// True when a search's re-match `again` replaces a first match `first` while a run of
 /// refusals has left no level to judge them ([`ValidationParams::search_after_refusals`]):
-/// the first falls more than `max_share_drop` below the re-match's share, and odometry's
-/// veto would not withhold the re-match where it lets the first pass (`disagrees`: whether
-/// the veto withholds a match, given its pose). A re-match that explains more of a scan in
-/// foliage by turning against odometry is no recovery (on the clinic log, 0.15 more of their
-/// scans at 12-19° that odometry never turned).
+/// the first falls more than `max_share_drop` below the re-match's share, and odometry's χ²
+/// test does not reject the re-match where it lets the first pass (`disagrees`: whether the
+/// test rejects a match, given its pose). A re-match that explains more of a scan in foliage
+/// by turning against odometry is no recovery (on the clinic log, re-matches explaining
+/// 0.15-0.21 more of their scans, turned up to 19° where odometry turned 0.1°).
 #[must_use]
 pub fn replaces_without_level(
     params: &ValidationParams,
