@@ -361,9 +361,9 @@ fn stuck_after_refusals(validation: ValidationParams) -> Pipeline<StuckAfterRefu
     )
 }
 
-/// Scans 11-14 of the room as [`stuck_after_refusals`] matches them, odometry slipping by 4°
-/// and 0.1 m at scan 14 (within its veto): each scan's position and heading errors, and
-/// whether it entered the map.
+/// The room's twenty scans as [`stuck_after_refusals`] matches them (scans 11-13 refused,
+/// scan 14 stuck), odometry slipping by 4° and 0.1 m at scan 14 (within its χ² test): each
+/// scan's position and heading errors, and whether it entered the map.
 fn stuck_after_refusals_run(validation: ValidationParams) -> Vec<(f64, f64, bool)> {
     let slip = Pose2::new(0.1, 0.0, 4f64.to_radians());
     let mut pipeline = stuck_after_refusals(validation);
