@@ -7,8 +7,9 @@ Simulates N drives of one world configuration (`configs/worlds/*.toml`), the lay
 noise seeds numbered as `qicp run --worlds N` numbers its worlds (the config's own seeds, then
 one more each world), and runs `qicp sweep` on each drive against its ground truth
 (`--reference groundtruth.tum`: relations drawn along the true path, a segment per metre or
-30°, and a revisit wherever it comes back within a metre of a pose a minute or more older). These are logs nobody tuned on: a parameter variant that breaks here breaks for reasons
-the Intel log cannot show.
+30°, and a revisit wherever it comes back within a metre of a pose a minute or more older).
+These are logs nobody tuned on: a parameter variant that breaks here breaks for reasons the
+Intel log cannot show.
 
 Prints one line per world and matcher, then per matcher: the parameter variants (names with
 `*`) over their bound, max(2 x default, 0.05 m), out of all run, and the input variants over

@@ -799,7 +799,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
                 if check.refused {
                     predicted >= fit.share
                 } else {
-                    (1.0 - self.validator.params.max_share_drop) * predicted > fit.share
+                    self.validator.params.falls_below(fit.share, predicted)
                 }
             };
             if (check.refused || unleveled) && astray(self.share(local, &guess, None)) {

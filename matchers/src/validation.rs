@@ -188,6 +188,14 @@ impl ValidationParams {
         }
         Ok(())
     }
+
+    /// True when `share` falls more than `max_share_drop` below `standing_in`, the share that
+    /// stands in for the level where none judges a match (the prediction's, after a run of
+    /// refusals; a search's re-match's).
+    #[must_use]
+    pub fn falls_below(&self, share: f64, standing_in: f64) -> bool {
+        (1.0 - self.max_share_drop) * standing_in > share
+    }
 }
 
 /// The squared Mahalanobis distance of `matched` from `predicted` under the prior information
@@ -240,7 +248,7 @@ pub fn replaces_without_level(
     (again, again_pose): (Fit, &Pose2),
     disagrees: impl Fn(&Pose2) -> bool,
 ) -> bool {
-    (1.0 - params.max_share_drop) * again.share > first.share
+    params.falls_below(first.share, again.share)
         && (!disagrees(again_pose) || disagrees(first_pose))
 }
 
