@@ -207,6 +207,92 @@ fn a_no_return_code_below_the_declared_max_range_is_found() {
     assert_eq!(log.info.ranges.no_return_code(), None);
 }
 
+/// `coded_log` without its `PARAM robot_front_laser_max`: the log does not say its maximum
+/// range, and the reader's 81 m is a guess.
+fn undeclared(text: &str) -> String {
+    text.lines()
+        .filter(|l| !l.starts_with("PARAM robot_front_laser_max"))
+        .map(|l| format!("{l}\n"))
+        .collect()
+}
+
+/// Read by path, a log that does not give its maximum range is probed at its head for a
+/// no-return code: one found is read as no-returns from the first record on, and the log's
+/// info says which and why. A maximum range the options give, or the log declares, is read
+/// as given: the code is then read as points, and the read's counts name it.
+#[test]
+fn a_no_return_code_at_the_head_of_a_log_is_read_as_no_returns() {
+    let path = scratch("probe").join("coded.clf");
+    std::fs::write(&path, undeclared(&coded_log(Some(50.0)))).unwrap();
+    let log = read_carmen(&path, &CarmenOptions::default()).unwrap();
+    let code = log.info.no_return_code.expect("a code");
+    assert!(
+        close(code.range, 50.0) && code.count == 40 * 36 && code.records == 40,
+        "{code:?}"
+    );
+    assert!(close(code.max_range, 49.995), "{code:?}");
+    for r in &log.records {
+        assert_eq!(r.scan.valid_count(), 180 - 36);
+        assert!(close(r.scan.geometry.max_range, 49.995));
+    }
+    assert_eq!(log.info.ranges.no_return_code(), None);
+    // The streaming reader reads the same.
+    let streamed: Vec<Record> =
+        qicp::logs::carmen::CarmenReader::open(&path, &CarmenOptions::default())
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+    assert_eq!(streamed, log.records);
+    // The guess given as the maximum: the code is read as points, and the counts name it.
+    let given = CarmenOptions {
+        max_range: Some(81.0),
+        ..CarmenOptions::default()
+    };
+    let log = read_carmen(&path, &given).unwrap();
+    assert_eq!(log.info.no_return_code, None);
+    assert_eq!(log.records[0].scan.valid_count(), 180);
+    assert!(log.info.ranges.no_return_code().is_some());
+    // A log that declares its maximum is read as it says.
+    std::fs::write(&path, coded_log(Some(29.5))).unwrap();
+    let log = read_carmen(&path, &CarmenOptions::default()).unwrap();
+    assert_eq!(log.info.no_return_code, None);
+    assert_eq!(log.records[0].scan.valid_count(), 180);
+    assert!(log.info.ranges.no_return_code().is_some());
+    // A log without a code is read as it is.
+    std::fs::write(&path, undeclared(&coded_log(None))).unwrap();
+    let log = read_carmen(&path, &CarmenOptions::default()).unwrap();
+    assert_eq!(log.info.no_return_code, None);
+    assert!(close(log.records[0].scan.geometry.max_range, 81.0));
+}
+
+/// A robot standing still reads its farthest return, through a door, in the same beam again
+/// and again: many readings of one range far above the metre below it, as a code would give,
+/// but in one beam, where a code stands wherever a beam finds nothing. It stays a point.
+#[test]
+fn a_far_return_a_standing_robot_reads_again_is_not_a_no_return_code() {
+    let mut text = String::new();
+    for scan in 0..300 {
+        let ranges: Vec<f64> = (0..180)
+            .map(|i| {
+                if i == 90 {
+                    27.9
+                } else {
+                    1.0 + f64::from(i % 45) * 0.2
+                }
+            })
+            .collect();
+        text += &flaser(&ranges, (0.0, 0.0, 0.0), f64::from(scan) * 0.2);
+        text += "\n";
+    }
+    let path = scratch("standing").join("door.clf");
+    std::fs::write(&path, &text).unwrap();
+    let log = read_carmen(&path, &CarmenOptions::default()).unwrap();
+    // The whole log's counts would call it a code; the probe's beams do not.
+    assert!(log.info.ranges.no_return_code().is_some());
+    assert_eq!(log.info.no_return_code, None);
+    assert_eq!(log.records[0].scan.valid_count(), 180);
+}
+
 /// Laser lines whose timestamps run back, and two ODOM lines out of order.
 fn jittered_log() -> String {
     [

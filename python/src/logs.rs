@@ -122,7 +122,10 @@ impl Log {
 /// raises `QicpError` naming its line (with `lenient=True` it is skipped and counted); a log
 /// without a laser record raises too. `fov_deg`, `max_range` and `min_range` describe the laser
 /// where the log's lines and `PARAM`s do not say it right (as `qicp match --fov-deg`,
-/// `--max-range`, `--min-range`); each given wins over the log.
+/// `--max-range`, `--min-range`); each given wins over the log. Without `max_range` the first
+/// 1,000 laser records are probed for a no-return code below the range the log declares (a
+/// range far more of them read than the metre below it, across the field of view), which is
+/// then read as a no-return: each `Record`'s `range_max` says where.
 #[pyfunction]
 #[pyo3(signature = (
     path, *, lenient = false, max_beams = DEFAULT_MAX_BEAMS, order = "file", fov_deg = None,

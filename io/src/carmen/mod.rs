@@ -253,6 +253,9 @@ pub struct LogInfo {
     pub first_beams: usize,
     /// The ranges the delivered scans keep, counted per centimetre.
     pub ranges: RangeCounts,
+    /// A no-return code found at the head of the log and read as no-returns
+    /// ([`no_return_probe`]; a log opened by path with no maximum range given).
+    pub no_return_code: Option<NoReturnCode>,
 }
 
 /// Readings beyond this range (m) are not counted by [`RangeCounts`].
@@ -304,6 +307,92 @@ impl RangeCounts {
             per_cm,
         ))
     }
+}
+
+/// Laser records [`no_return_probe`] reads from the head of a log.
+pub const NO_RETURN_PROBE_RECORDS: usize = 1_000;
+/// Distinct beams that must read a no-return code in the probe: a code stands wherever a beam
+/// finds nothing, across the field of view, where a real far return that the robot, standing
+/// still, reads again and again stands in a beam or two.
+const CODE_MIN_BEAMS: usize = 10;
+
+/// A no-return code found at the head of a log ([`no_return_probe`]) and read as no-returns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoReturnCode {
+    /// The code (m).
+    pub range: f64,
+    /// Readings of the probe that read it.
+    pub count: u64,
+    /// Average readings per centimetre of the probe in the metre below it.
+    pub per_cm: f64,
+    /// Records the probe read.
+    pub records: usize,
+    /// The maximum range the records are read with: just below the code.
+    pub max_range: f64,
+}
+
+/// Where neither the options (`opts.max_range`) nor the log give a maximum range, the
+/// 81 m of [`DEFAULT_FLASER_MAX_RANGE`] is a guess: reads the first
+/// [`NO_RETURN_PROBE_RECORDS`] laser records of `path` and looks for a no-return code below it,
+/// by the rule of [`RangeCounts::no_return_code`], read by at least [`CODE_MIN_BEAMS`] distinct
+/// beams. A 50 m laser's `FLASER` lines with no `PARAM robot_front_laser_max` would otherwise
+/// put a phantom point in every beam that found nothing, on a circle that moves with the
+/// robot and pulls each match towards standing still: on Intel with its no-returns written
+/// as 50 m, q-wsm scored 3.36 m and q-idc 1.93 m against 0.020 and 0.017 m. A log that gives
+/// its maximum range (a `PARAM robot_front_laser_max`, or `ROBOTLASER1` lines, which carry
+/// their own) is read as it says, and a code below it is named by the warning after the read
+/// ([`LogInfo::warn`]): the Freiburg clinic's lines declare 81.9 m and write 81.83 m for a
+/// no-return in about one reading of 200, and read as no-returns they turned q-wsm's heading
+/// outdoors up to 45° off q-idc's, against 12.5° read as points (the README, Data). `None`
+/// where a maximum range is given, or the probe finds no code, or the head of the log cannot
+/// be read (the read proper then says why).
+pub fn no_return_probe(path: &Path, opts: &CarmenOptions) -> Option<NoReturnCode> {
+    if opts.max_range.is_some() {
+        return None;
+    }
+    let probe = CarmenOptions {
+        lenient: true,
+        ..opts.clone()
+    };
+    let mut reader = CarmenReader::open_as_given(path, &probe).ok()?;
+    let records: Vec<Record> = reader
+        .by_ref()
+        .take(NO_RETURN_PROBE_RECORDS)
+        .map_while(Result::ok)
+        .collect();
+    let declared = reader.info.params.contains_key("robot_front_laser_max")
+        || reader.info.counts.contains_key("ROBOTLASER1");
+    if declared {
+        return None;
+    }
+    let (range, count, per_cm) = reader.info.ranges.no_return_code()?;
+    let code_cm = (range * 100.0).round();
+    let mut beams = std::collections::BTreeSet::new();
+    for r in &records {
+        for (k, &beam) in r.scan.beam_of_point().iter().enumerate() {
+            if (r.scan.point_range(k) * 100.0).round() == code_cm {
+                beams.insert(beam);
+            }
+        }
+    }
+    (beams.len() >= CODE_MIN_BEAMS).then_some(NoReturnCode {
+        range,
+        count,
+        per_cm,
+        records: records.len(),
+        max_range: range - 0.005,
+    })
+}
+
+/// The options a log at `path` is read with: `opts`, with the maximum range set just below a
+/// no-return code [`no_return_probe`] finds, and that code.
+fn with_no_return_code(path: &Path, opts: &CarmenOptions) -> (CarmenOptions, Option<NoReturnCode>) {
+    let code = no_return_probe(path, opts);
+    let opts = CarmenOptions {
+        max_range: code.map(|c| c.max_range).or(opts.max_range),
+        ..opts.clone()
+    };
+    (opts, code)
 }
 
 impl LogInfo {
@@ -380,6 +469,20 @@ impl LogInfo {
                 self.late,
                 path.display(),
                 DEFAULT_REORDER_WINDOW
+            );
+        }
+        if let Some(code) = self.no_return_code {
+            qicp_core::note!(
+                "note: {} readings of the first {} records of {} read {:.2} m, the largest \
+                 range, against {:.1} per centimetre in the metre below: a no-return code, \
+                 read as no-returns (the maximum range set to {:.3} m; --max-range gives \
+                 another)",
+                code.count,
+                code.records,
+                path.display(),
+                code.range,
+                code.per_cm,
+                code.max_range
             );
         }
         if let Some((range, count, per_cm)) = self.ranges.no_return_code() {
@@ -498,8 +601,11 @@ pub fn load_for_command(path: &Path, lenient: bool) -> Result<CarmenLog, LogErro
 /// Reads a whole CARMEN log into memory, plain or bzip2-compressed. To match a long log in
 /// bounded memory, iterate a [`CarmenReader`] instead.
 pub fn read_carmen(path: &Path, opts: &CarmenOptions) -> Result<CarmenLog, LogError> {
+    let (opts, code) = with_no_return_code(path, opts);
     let mut reader = super::open_text(path)?;
-    read_carmen_from(&mut reader, &path.display().to_string(), opts)
+    let mut log = read_carmen_from(&mut reader, &path.display().to_string(), &opts)?;
+    log.info.no_return_code = code;
+    Ok(log)
 }
 
 /// Reads a whole CARMEN log from any reader (already decompressed); `name` is used in errors.

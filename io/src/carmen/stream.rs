@@ -99,7 +99,21 @@ impl<R> std::fmt::Debug for CarmenReader<R> {
 
 impl CarmenReader<Box<dyn BufRead + Send>> {
     /// Opens a CARMEN log, plain or bzip2-compressed.
+    ///
+    /// Where `opts` gives no maximum range, the head of the log is read first for a no-return
+    /// code below the range the log declares ([`super::no_return_probe`]); one found is read
+    /// as no-returns, and [`LogInfo::no_return_code`] says so.
     pub fn open(path: &Path, opts: &CarmenOptions) -> Result<Self, LogError> {
+        let (opts, code) = super::with_no_return_code(path, opts);
+        let reader = crate::open_text(path)?;
+        let mut stream = Self::new(reader, &path.display().to_string(), &opts)?;
+        stream.info.no_return_code = code;
+        Ok(stream)
+    }
+
+    /// Opens a CARMEN log as [`CarmenReader::open`] does, without the probe: as `opts` and
+    /// the log say.
+    pub(super) fn open_as_given(path: &Path, opts: &CarmenOptions) -> Result<Self, LogError> {
         let reader = crate::open_text(path)?;
         Self::new(reader, &path.display().to_string(), opts)
     }
