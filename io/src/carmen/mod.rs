@@ -254,7 +254,8 @@ pub struct LogInfo {
     /// The ranges the delivered scans keep, counted per centimetre.
     pub ranges: RangeCounts,
     /// A no-return code found at the head of the log and read as no-returns
-    /// ([`no_return_probe`]; a log opened by path with no maximum range given).
+    /// ([`no_return_probe`]: a log opened by path that does not say its maximum range, with
+    /// none given).
     pub no_return_code: Option<NoReturnCode>,
 }
 
@@ -314,7 +315,7 @@ pub const NO_RETURN_PROBE_RECORDS: usize = 1_000;
 /// Distinct beams that must read a no-return code in the probe: a code stands wherever a beam
 /// finds nothing, across the field of view, where a real far return that the robot, standing
 /// still, reads again and again stands in a beam or two.
-const CODE_MIN_BEAMS: usize = 10;
+pub const CODE_MIN_BEAMS: usize = 10;
 
 /// A no-return code found at the head of a log ([`no_return_probe`]) and read as no-returns.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -100,9 +100,10 @@ impl<R> std::fmt::Debug for CarmenReader<R> {
 impl CarmenReader<Box<dyn BufRead + Send>> {
     /// Opens a CARMEN log, plain or bzip2-compressed.
     ///
-    /// Where `opts` gives no maximum range, the head of the log is read first for a no-return
-    /// code below the range the log declares ([`super::no_return_probe`]); one found is read
-    /// as no-returns, and [`LogInfo::no_return_code`] says so.
+    /// Where neither `opts` nor the log gives a maximum range (`FLASER` lines with no `PARAM
+    /// robot_front_laser_max`), the head of the log is read first for a no-return code below
+    /// the guessed 81 m ([`super::no_return_probe`]); one found is read as no-returns, and
+    /// [`LogInfo::no_return_code`] says so.
     pub fn open(path: &Path, opts: &CarmenOptions) -> Result<Self, LogError> {
         let (opts, code) = super::with_no_return_code(path, opts);
         let reader = crate::open_text(path)?;

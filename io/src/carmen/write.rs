@@ -34,7 +34,7 @@ fn flaser_fit(scan: &Scan) -> Option<(f64, f64)> {
 /// laser offset) as an `ODOM` line and a `ROBOTLASER1` line, which carries its own geometry.
 /// A `TRUEPOS` line follows when the record has a ground truth. Numbers are written in full
 /// (shortest round-tripping) precision. CARMEN has no field for a minimum range: it is not
-/// written (set [`CarmenOptions::min_range`] when reading back).
+/// written (set [`CarmenOptions::min_range`](super::CarmenOptions::min_range) when reading back).
 pub fn write_carmen<W: Write>(w: W, records: &[Record]) -> std::io::Result<()> {
     let mut w = std::io::BufWriter::new(w);
     let header = records.iter().find_map(|r| {
