@@ -221,7 +221,9 @@ fn a_laser_mounted_off_the_robots_origin_is_placed_as_at_the_origin() {
         println!(
             "{kind}: laser poses at most {apart:.2e} m apart; {origin:.4} m, mounted {off:.4} m"
         );
-        if kind == MatcherKind::QWsm {
+        // WSM's matches settle at the same pose from starts a last bit apart; IDC's runs part
+        // (see above).
+        if kind != MatcherKind::QIdc {
             assert!(apart < 1e-6, "{kind}: laser poses {apart:.2e} m apart");
         }
         assert!(
