@@ -346,9 +346,12 @@ pub struct NoReturnCode {
 /// no-return in about one reading of 200, and read as no-returns they turned q-wsm's heading
 /// outdoors up to 45° off q-idc's, against 12.5° read as points (the README, Data). `None`
 /// where a maximum range is given, or the probe finds no code, or the head of the log cannot
-/// be read (the read proper then says why).
+/// be read (the read proper then says why), or `path` is not a regular file: a log on a pipe
+/// can be read only once, and the probe would take its head from the read (such a log is read
+/// as it says, and the warning after the read names a code).
 pub fn no_return_probe(path: &Path, opts: &CarmenOptions) -> Option<NoReturnCode> {
-    if opts.max_range.is_some() {
+    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    if opts.max_range.is_some() || !regular {
         return None;
     }
     let probe = CarmenOptions {

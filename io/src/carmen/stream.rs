@@ -101,9 +101,9 @@ impl CarmenReader<Box<dyn BufRead + Send>> {
     /// Opens a CARMEN log, plain or bzip2-compressed.
     ///
     /// Where neither `opts` nor the log gives a maximum range (`FLASER` lines with no `PARAM
-    /// robot_front_laser_max`), the head of the log is read first for a no-return code below
-    /// the guessed 81 m ([`super::no_return_probe`]); one found is read as no-returns, and
-    /// [`LogInfo::no_return_code`] says so.
+    /// robot_front_laser_max`), the head of a regular file is read first for a no-return code
+    /// below the guessed 81 m ([`super::no_return_probe`]); one found is read as no-returns,
+    /// and [`LogInfo::no_return_code`] says so.
     pub fn open(path: &Path, opts: &CarmenOptions) -> Result<Self, LogError> {
         let (opts, code) = super::with_no_return_code(path, opts);
         let reader = crate::open_text(path)?;
