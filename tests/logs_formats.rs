@@ -230,7 +230,7 @@ fn a_no_return_code_at_the_head_of_a_log_is_read_as_no_returns() {
         close(code.range, 50.0) && code.count == 40 * 36 && code.records == 40,
         "{code:?}"
     );
-    assert!(close(code.max_range, 49.995), "{code:?}");
+    assert!(close(code.max_range(), 49.995), "{code:?}");
     for r in &log.records {
         assert_eq!(r.scan.valid_count(), 180 - 36);
         assert!(close(r.scan.geometry.max_range, 49.995));

@@ -122,8 +122,9 @@ impl Log {
 /// raises `QicpError` naming its line (with `lenient=True` it is skipped and counted); a log
 /// without a laser record raises too. `fov_deg`, `max_range` and `min_range` describe the laser
 /// where the log's lines and `PARAM`s do not say it right (as `qicp match --fov-deg`,
-/// `--max-range`, `--min-range`); each given wins over the log. Without `max_range` the first
-/// 1,000 laser records are probed for a no-return code below the range the log declares (a
+/// `--max-range`, `--min-range`); each given wins over the log. Without `max_range`, a log
+/// that does not say its maximum range (`FLASER` lines with no `PARAM robot_front_laser_max`)
+/// has its first 1,000 laser records probed for a no-return code below the guessed 81 m (a
 /// range far more of them read than the metre below it, across the field of view), which is
 /// then read as a no-return: each `Record`'s `range_max` says where.
 #[pyfunction]

@@ -328,8 +328,20 @@ pub struct NoReturnCode {
     pub per_cm: f64,
     /// Records the probe read.
     pub records: usize,
-    /// The maximum range the records are read with: just below the code.
-    pub max_range: f64,
+}
+
+impl NoReturnCode {
+    /// The maximum range the records are read with: half a centimetre below the code.
+    #[must_use]
+    pub fn max_range(&self) -> f64 {
+        just_below(self.range)
+    }
+}
+
+/// The maximum range that reads `code` as a no-return and keeps everything shorter: half a
+/// centimetre below it, as logs write their ranges to the centimetre.
+fn just_below(code: f64) -> f64 {
+    code - 0.005
 }
 
 /// Where neither the options (`opts.max_range`) nor the log give a maximum range, the
@@ -384,7 +396,6 @@ pub fn no_return_probe(path: &Path, opts: &CarmenOptions) -> Option<NoReturnCode
         count,
         per_cm,
         records: records.len(),
-        max_range: range - 0.005,
     })
 }
 
@@ -393,7 +404,7 @@ pub fn no_return_probe(path: &Path, opts: &CarmenOptions) -> Option<NoReturnCode
 fn with_no_return_code(path: &Path, opts: &CarmenOptions) -> (CarmenOptions, Option<NoReturnCode>) {
     let code = no_return_probe(path, opts);
     let opts = CarmenOptions {
-        max_range: code.map(|c| c.max_range).or(opts.max_range),
+        max_range: code.map(|c| c.max_range()).or(opts.max_range),
         ..opts.clone()
     };
     (opts, code)
@@ -486,7 +497,7 @@ impl LogInfo {
                 path.display(),
                 code.range,
                 code.per_cm,
-                code.max_range
+                code.max_range()
             );
         }
         if let Some((range, count, per_cm)) = self.ranges.no_return_code() {
@@ -495,7 +506,7 @@ impl LogInfo {
                  against {per_cm:.1} per centimetre in the metre below: a no-return code, \
                  read as points? --max-range {:.3} drops them",
                 path.display(),
-                range - 0.005
+                just_below(range)
             );
         }
         if !self.unknown_types.is_empty() {
