@@ -35,6 +35,24 @@ pub struct WsmParams {
     /// guesses, keep their pairs: at a corridor's door jambs they fix its length. 0: off.
     /// Default 90 (faces that look opposite ways).
     pub face_angle_deg: f64,
+    /// Against a map ([`Reference::is_map`]), a stage whose gate is still wider than
+    /// `matcher.icp.max_dist_end` ends once a step moves the scan's points by less than this
+    /// fraction of the gate (root mean square): the next, narrower gate pairs them afresh,
+    /// and refining a wide stage is wasted work. Scan to scan, where every match's error
+    /// stays in the trajectory, every stage runs until the `matcher.icp` tolerances (or its
+    /// iteration budget), as it does at 0. Default 0.1.
+    pub stage_tolerance: f64,
+    /// Against a map, the last stage also settles when a step moves less than this (m)…
+    /// Below it the steps are the jitter of pairs switching between the overlapping samples
+    /// of a map, as IDC's
+    /// ([`IdcParams::settle_translation`](crate::IdcParams::settle_translation)). Where the
+    /// scan barely fixes a direction (a corridor), steps along it stay small while the
+    /// estimate still slides: at 1 mm the matches of `matchers/tests/degeneracy.rs`'s
+    /// 721-beam corridor stopped up to 10 mm short along its axis, at 0.5 mm 3.9 mm. Default
+    /// 0.0005. 0 with `settle_rotation_deg` 0: the `matcher.icp` tolerances alone.
+    pub settle_translation: f64,
+    /// … and turns less than this (deg). Default 0.03.
+    pub settle_rotation_deg: f64,
 }
 
 impl Default for WsmParams {
@@ -44,6 +62,9 @@ impl Default for WsmParams {
             sigma_slide: 0.1,
             normal_fraction: 0.01,
             face_angle_deg: 90.0,
+            stage_tolerance: 0.1,
+            settle_translation: 0.0005,
+            settle_rotation_deg: 0.03,
         }
     }
 }
@@ -77,6 +98,21 @@ impl Algorithm for WsmAlgorithm {
             "against a map, a pair of two straight surfaces whose normals differ more (deg) is dropped (0: off)",
         )
         .acting_on(Acts::Map),
+        Param::new(
+            "stage_tolerance",
+            Range::Closed(0.0, 1.0),
+            "against a map, a wide stage ends when a step moves the points less than this fraction of the gate (0: off)",
+        ),
+        Param::new(
+            "settle_translation",
+            Range::NonNegative,
+            "against a map, the last stage settles below this step (m)",
+        ),
+        Param::new(
+            "settle_rotation_deg",
+            Range::NonNegative,
+            "… and below this turn (deg)",
+        ),
     ];
     type Params = WsmParams;
     type Matcher<C: Metric> = Wsm<C>;
@@ -93,6 +129,33 @@ impl WsmParams {
     /// Checks every value against its declared range; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
         check_section("matcher.wsm", self, WsmAlgorithm::PARAMETERS)
+    }
+
+    /// True when, against a map (`map`), the step from `pose` to `next` ends its stage early:
+    /// at a wider gate than the last (`final_stage` false) when it moves the scan's points
+    /// `local` by less than `stage_tolerance` × `gate` (root mean square); at the last when
+    /// it moves less than `settle_translation` and turns less than `settle_rotation_deg`.
+    /// Never scan to scan.
+    #[must_use]
+    pub fn settles(
+        &self,
+        pose: &Pose2,
+        next: &Pose2,
+        local: &[Point2<f64>],
+        gate: f64,
+        (final_stage, map): (bool, bool),
+    ) -> bool {
+        if !map {
+            return false;
+        }
+        if final_stage {
+            let turned = qicp_core::normalize_angle(pose.theta - next.theta).abs();
+            return pose.distance(next) < self.settle_translation
+                && turned < self.settle_rotation_deg.to_radians();
+        }
+        self.stage_tolerance > 0.0
+            && !local.is_empty()
+            && rms_motion(pose, next, local) < self.stage_tolerance * gate
     }
 
     /// Covariance of the correspondence error at a reference point (Pfister et al. Sec. IV):
@@ -114,6 +177,17 @@ impl WsmParams {
         let t = Vector2::new(-n.y, n.x);
         t * t.transpose() * v + n * n.transpose() * (v * self.normal_fraction)
     }
+}
+
+/// How far moving from `a` to `b` moves the points `local` (root mean square, m).
+fn rms_motion(a: &Pose2, b: &Pose2, local: &[Point2<f64>]) -> f64 {
+    let turn = b.rotation() - a.rotation();
+    let shift = b.translation() - a.translation();
+    let sum: f64 = local
+        .iter()
+        .map(|p| (turn * p.coords + shift).norm_squared())
+        .sum();
+    (sum / local.len() as f64).sqrt()
 }
 
 /// Adds the guess as a Gaussian prior: cost (guess − pose)ᵀ Λ (guess − pose).
@@ -294,9 +368,16 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
                 return MatchResult::fallback(guess, Fallback::Degenerate);
             };
             let next = apply_step(&pose, &step);
-            let settled = self.icp.small_step(&pose, &next);
-            pose = next;
             let final_stage = self.icp.at_last_gate(schedule.level);
+            let settled = self.icp.small_step(&pose, &next)
+                || self.params.settles(
+                    &pose,
+                    &next,
+                    local,
+                    gate,
+                    (final_stage, reference.is_map()),
+                );
+            pose = next;
             if schedule.advance(&self.icp, settled, final_stage) {
                 converged = true;
                 break;
@@ -341,5 +422,36 @@ impl<C: CorrespondenceMetric> ScanMatcher for Wsm<C> {
             converged,
             fallback: None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rms_motion_is_the_points_root_mean_square_displacement() {
+        let ring: Vec<Point2<f64>> = (0..8)
+            .map(|k| {
+                let a = f64::from(k) * std::f64::consts::FRAC_PI_4;
+                Point2::new(2.0 * a.cos(), 2.0 * a.sin())
+            })
+            .collect();
+        let at = Pose2::new(1.0, -2.0, 0.7);
+        // A shift moves every point by its length, a turn about the laser by the chord.
+        let shifted = Pose2::new(1.03, -1.96, 0.7);
+        assert!((rms_motion(&at, &shifted, &ring) - 0.05).abs() < 1e-12);
+        let turned = Pose2::new(1.0, -2.0, 0.75);
+        let chord = 2.0 * 2.0 * (0.025f64).sin();
+        assert!((rms_motion(&at, &turned, &ring) - chord).abs() < 1e-12);
+        // Against each point moved one by one.
+        let both = Pose2::new(0.9, -2.1, 0.6);
+        let brute = (ring
+            .iter()
+            .map(|p| (both.transform_point(p) - at.transform_point(p)).norm_squared())
+            .sum::<f64>()
+            / 8.0)
+            .sqrt();
+        assert!((rms_motion(&at, &both, &ring) - brute).abs() < 1e-12);
     }
 }
