@@ -35,9 +35,7 @@ pub use index::{
 };
 pub use kdtree::KdTree;
 pub use matcher::ScanMatcher;
-pub use metric::{
-    ClosestPoint, CorrespondenceMetric, MatchingRange, MutualNearest, NearestCache, Pair, Query,
-};
+pub use metric::{ClosestPoint, CorrespondenceMetric, MatchingRange, MutualNearest, Pair, Query};
 pub use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 pub use pose::{Pose2, normalize_angle};
 pub use quadtree::{QuadTree, QuadTreeN};

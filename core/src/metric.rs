@@ -120,12 +120,8 @@ fn kept_for_next_scan(cached_for: Option<Identity>) -> Option<Identity> {
 /// adapts per entry between [`MIN_SLACK`](NearestCache::MIN_SLACK) and
 /// [`SLACK`](NearestCache::SLACK) so that a fill keeps about 8-32 points: a q-wsm map that
 /// holds every point of every relevant scan put hundreds into a 5 cm slack.
-///
-/// Any repeated nearest-point search can use one: IDC's check of a match
-/// (`qicp_matchers::Idc`) asks for the nearest map point of every scan point at the guess and
-/// again at the result, each answered as [`SpatialIndex::nearest_within`] would.
 #[derive(Debug, Clone, Default)]
-pub struct NearestCache {
+struct NearestCache {
     entries: Vec<CachedSearch>,
     cached_for: Option<Identity>,
 }
@@ -152,13 +148,13 @@ impl NearestCache {
 
     /// A new scan: the entries stay where the reference counts its revisions
     /// ([`kept_for_next_scan`]); the next search checks it is still the same.
-    pub fn next_scan(&mut self) {
+    fn next_scan(&mut self) {
         self.cached_for = kept_for_next_scan(self.cached_for);
     }
 
     /// Prepares for `n` scan points searched in `reference`; entries from another reference
     /// are dropped.
-    pub fn prepare<I: SpatialIndex>(&mut self, reference: &I, n: usize) {
+    fn prepare<I: SpatialIndex>(&mut self, reference: &I, n: usize) {
         let identity = Identity::of(reference);
         if self.cached_for != Some(identity) {
             for e in &mut self.entries {
@@ -178,7 +174,7 @@ impl NearestCache {
     /// [`SpatialIndex::nearest_within`] for scan point `k` at `p` (call [`prepare`] first).
     ///
     /// [`prepare`]: Self::prepare
-    pub fn nearest_within<I: SpatialIndex>(
+    fn nearest_within<I: SpatialIndex>(
         &mut self,
         reference: &I,
         k: usize,

@@ -1,8 +1,8 @@
 //! Iterative Dual Correspondence (Lu & Milios 1997).
 use crate::icp::{IcpParams, Schedule, move_points, residual, trim};
 use qicp_core::{
-    ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix3,
-    NearestCache, Pair, Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex,
+    ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix3, Pair,
+    Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex,
 };
 
 mod params;
@@ -30,8 +30,6 @@ pub struct Idc<C = ClosestPoint> {
     scratch: Vec<f64>,
     samples: Vec<(f64, f64)>,
     feet: Vec<(Point2<f64>, Point2<f64>)>,
-    /// The check's nearest-point searches ([`Idc::misfit`]), per scan point.
-    verify_searches: NearestCache,
 }
 
 impl<C: CorrespondenceMetric + Default> Idc<C> {
@@ -156,26 +154,20 @@ impl<C: CorrespondenceMetric> Idc<C> {
     /// from the point to the reference surface through its nearest sample, D
     /// [`VERIFY_DISTANCE`] (also for points with no sample that near). Lower is better.
     fn misfit<I: SpatialIndex>(
-        &mut self,
         reference: &Reference<I>,
         local: &[Point2<f64>],
         pose: &Pose2,
     ) -> f64 {
         let cap = VERIFY_DISTANCE * VERIFY_DISTANCE;
-        let index = reference.index();
-        self.verify_searches.prepare(index, local.len());
-        let mut sum = 0.0;
-        for (k, b) in local.iter().enumerate() {
-            let p = pose.transform_point(b);
-            // The distance to the surface through the nearest point, as
-            // `Reference::surface_distance_sq` gives it, from the cached searches.
-            let d_sq = self
-                .verify_searches
-                .nearest_within(index, k, &p, 4.0 * cap)
-                .map(|n| (reference.surface_foot(n.id, &p) - p).norm_squared());
-            sum += d_sq.map_or(cap, |d_sq| d_sq.min(cap));
-        }
-        sum
+        local
+            .iter()
+            .map(|b| {
+                let p = pose.transform_point(b);
+                reference
+                    .surface_distance_sq(&p, 4.0 * cap)
+                    .map_or(cap, |d_sq| d_sq.min(cap))
+            })
+            .sum()
     }
 }
 
@@ -217,10 +209,9 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         let local = scan.points();
         self.closest.begin_scan(local);
         self.range_rule.begin_scan(local);
-        self.verify_searches.next_scan();
         // Odometry that explains the scan this badly is wrong (the Intel log has records whose
         // timestamps put them out of order): match without its prior, from a full window.
-        let guess_misfit = self.misfit(reference, local, &guess);
+        let guess_misfit = Self::misfit(reference, local, &guess);
         let suspect = self.params.verify
             && guess_misfit
                 > SUSPECT_GUESS * local.len() as f64 * VERIFY_DISTANCE * VERIFY_DISTANCE;
@@ -239,14 +230,14 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             // The initial guess explains the scan better than the result: the iteration went
             // astray (a wide window's range pairs, a local minimum). Refine the guess with the
             // closest-point rule alone, at the last gate, and keep whichever fits best.
-            let misfit = self.misfit(reference, local, &pose);
+            let misfit = Self::misfit(reference, local, &pose);
             if guess_misfit < misfit {
                 let last = self.icp.last_level();
                 if let Ok((again, more, settled)) =
                     self.iterate(reference, local, guess, &guess, prior, window, last)
                 {
                     iterations += more;
-                    if self.misfit(reference, local, &again) < misfit {
+                    if Self::misfit(reference, local, &again) < misfit {
                         pose = again;
                         converged = settled;
                     }
@@ -286,60 +277,6 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             residual: residual(reference, local, &self.cp, &pose),
             converged,
             fallback: None,
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use qicp_core::testdata::{SplitMix, SyntheticWorld};
-    use qicp_core::{Merge, MutualNearest, QuadTree};
-
-    /// The misfit as it was computed before its searches were cached: a fresh search per point.
-    fn fresh_misfit(reference: &Reference<QuadTree>, local: &[Point2<f64>], pose: &Pose2) -> f64 {
-        let cap = VERIFY_DISTANCE * VERIFY_DISTANCE;
-        local
-            .iter()
-            .map(|b| {
-                let p = pose.transform_point(b);
-                reference
-                    .surface_distance_sq(&p, 4.0 * cap)
-                    .map_or(cap, |d_sq| d_sq.min(cap))
-            })
-            .sum()
-    }
-
-    #[test]
-    fn the_cached_misfit_equals_fresh_searches_bit_for_bit() {
-        let world = SyntheticWorld::room();
-        let mut rng = SplitMix::new(11);
-        let mut map = Reference::new(QuadTree::default());
-        let mut idc = Idc::<MutualNearest<QuadTree>>::default();
-        let mut at = Pose2::new(-1.0, 0.0, 0.1);
-        for k in 0..40u64 {
-            // Every fourth scan enters the map, which changes its revision.
-            if k % 4 == 0 {
-                map.insert_scan(&world.scan(&at, 0.01, k), &at, Some(Merge::spacing(0.01)))
-                    .expect("finite points");
-            }
-            at = at * Pose2::new(0.05, 0.0, 0.01);
-            let scan = world.scan(&at, 0.01, 100 + k);
-            let local = scan.points();
-            idc.verify_searches.next_scan();
-            // The guess, the result a few millimetres on, and a start decimetres off.
-            for spread in [0.0, 0.005, 0.005, 0.2] {
-                let pose = Pose2::new(
-                    at.x + spread * rng.normal(),
-                    at.y + spread * rng.normal(),
-                    at.theta + spread * rng.normal(),
-                );
-                let cached = idc.misfit(&map, local, &pose);
-                assert_eq!(
-                    cached.to_bits(),
-                    fresh_misfit(&map, local, &pose).to_bits()
-                );
-            }
         }
     }
 }
