@@ -283,7 +283,10 @@ fn a_no_return_code_is_named_and_the_laser_options_drop_it() {
 /// look-up (`revisit.confirmations = 1`, the sweep's `confirmations*0.7`), q-wsm's match held
 /// a position σ of 0.2 m, the pose turned and the drive ended 10.4 m ATE off (0.81 m without
 /// the re-anchoring). A re-anchoring whose σ exceeds the tolerance its correction is compared
-/// with is not taken.
+/// with is not taken. With WSM's stages ending early against a map, the look-up at scan 752
+/// proposes a σ of 227 mm, and one at scan 592 a σ of 95 mm (six pairs), within the
+/// tolerance: taken, the drive ends 0.77 m ATE off (0.80 m without it); with the check
+/// removed both are taken.
 #[test]
 fn a_reanchoring_on_a_few_far_trunks_is_not_taken() {
     let dir = temp("sparse-park");
@@ -321,8 +324,19 @@ fn a_reanchoring_on_a_few_far_trunks_is_not_taken() {
         "--json",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
-    assert_eq!(summary["reanchored"], 0, "{summary}");
+    // Every re-anchored match is determined within the tolerance (σ ≤ 0.1 m).
+    let matches = std::fs::read_to_string(path("q-wsm/matches.csv")).expect("matches.csv");
+    let mut rows = matches.lines();
+    let header: Vec<&str> = rows.next().expect("a header").split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (sigma, check) = (column("sigma_mm"), column("check"));
+    for (k, row) in rows.enumerate() {
+        let fields: Vec<&str> = row.split(',').collect();
+        if fields[check] == "reanchored" {
+            let s: f64 = fields[sigma].parse().expect("a σ");
+            assert!(s <= 100.0, "scan {k} re-anchored with σ {s} mm");
+        }
+    }
     let o = qicp(&[
         "eval",
         "ate",

@@ -134,11 +134,7 @@ impl<C: CorrespondenceMetric> Idc<C> {
                 qicp_core::normalize_angle(pose.theta - next.theta).abs(),
             );
             let settled = if coarse {
-                let f = if reference.is_map() {
-                    self.params.map_stage_tolerance
-                } else {
-                    self.params.stage_tolerance
-                };
+                let f = self.params.stage_tolerance;
                 moved < gate * f && turned < window_deg.to_radians() * f
             } else {
                 self.icp.small_step(&pose, &next)
