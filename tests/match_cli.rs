@@ -283,10 +283,10 @@ fn a_no_return_code_is_named_and_the_laser_options_drop_it() {
 /// look-up (`revisit.confirmations = 1`, the sweep's `confirmations*0.7`), q-wsm's match held
 /// a position σ of 0.2 m, the pose turned and the drive ended 10.4 m ATE off (0.81 m without
 /// the re-anchoring). A re-anchoring whose σ exceeds the tolerance its correction is compared
-/// with is not taken. With WSM's stages ending early against a map, the look-up at scan 752
-/// proposes a σ of 227 mm, and one at scan 592 a σ of 95 mm (six pairs), within the
-/// tolerance: taken, the drive ends 0.77 m ATE off (0.80 m without it); with the check
-/// removed both are taken.
+/// with is not taken. With WSM's stages ending early against a map (`[matcher.wsm]
+/// stage_tolerance = 0.1`, off by default), the look-up at scan 752 proposes a σ of 227 mm and
+/// one at scan 592 a σ of 95 mm (six pairs), within the tolerance: that one is taken and the
+/// drive ends 0.77 m ATE off (0.80 m without it); with the check removed both are taken.
 #[test]
 fn a_reanchoring_on_a_few_far_trunks_is_not_taken() {
     let dir = temp("sparse-park");
