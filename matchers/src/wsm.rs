@@ -156,6 +156,10 @@ impl WsmParams {
             return false;
         }
         if final_stage {
+            // Off (the default): no work per iteration.
+            if self.settle_translation <= 0.0 {
+                return false;
+            }
             let turned = qicp_core::normalize_angle(pose.theta - next.theta).abs();
             return pose.distance(next) < self.settle_translation
                 && turned < self.settle_rotation_deg.to_radians();

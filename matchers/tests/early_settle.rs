@@ -93,22 +93,13 @@ fn as_accurate_in_fewer(early: &[(Pose2, Pose2, u32)], full: &[(Pose2, Pose2, u3
     );
 }
 
-/// WSM ending its stages early: a tenth of the gate, 0.5 mm and 0.03°.
+/// WSM ending its stages early: a tenth of the gate, 0.5 mm and 0.03°. Its default,
+/// `WsmParams::default()`, iterates every stage to the `[matcher.icp]` tolerances.
 fn early() -> WsmParams {
     WsmParams {
         stage_tolerance: 0.1,
         settle_translation: 0.0005,
         settle_rotation_deg: 0.03,
-        ..WsmParams::default()
-    }
-}
-
-/// WSM with every stage iterated to the `[matcher.icp]` tolerances (the default).
-fn plain() -> WsmParams {
-    WsmParams {
-        stage_tolerance: 0.0,
-        settle_translation: 0.0,
-        settle_rotation_deg: 0.0,
         ..WsmParams::default()
     }
 }
@@ -122,7 +113,7 @@ fn wsm_settling_early_against_a_map_is_as_accurate_in_fewer_iterations() {
             Wsm::<MutualNearest<QuadTree>>::new(IcpParams::default(), early())
         });
         let full = trials(&world, true, || {
-            Wsm::<MutualNearest<QuadTree>>::new(IcpParams::default(), plain())
+            Wsm::<MutualNearest<QuadTree>>::new(IcpParams::default(), WsmParams::default())
         });
         as_accurate_in_fewer(&early, &full, 0.6);
     }
@@ -135,7 +126,7 @@ fn scan_to_scan_wsm_iterates_every_stage_to_the_tolerances() {
             Wsm::<ClosestPoint>::new(IcpParams::default(), early())
         });
         let full = trials(&world, false, || {
-            Wsm::<ClosestPoint>::new(IcpParams::default(), plain())
+            Wsm::<ClosestPoint>::new(IcpParams::default(), WsmParams::default())
         });
         assert_eq!(early, full);
     }
