@@ -111,6 +111,8 @@ impl<C: CorrespondenceMetric> Idc<C> {
             // refines it (the range rule's interpolation assumes straight surfaces).
             let coarse = window_deg > end_deg;
             let mut range_theta = None;
+            // The range rule's standard error, against a map only (see `stage_sigmas`).
+            let mut range_se = 0.0;
             if coarse {
                 self.range_rule.window = window_deg.to_radians();
                 self.range_rule
@@ -121,8 +123,13 @@ impl<C: CorrespondenceMetric> Idc<C> {
                     self.icp.max_dist_end,
                     &mut self.scratch,
                 );
-                if self.mr.len() >= self.icp.min_correspondences {
-                    range_theta = self.range_rotation(reference, &pose);
+                if self.mr.len() >= self.icp.min_correspondences
+                    && let Some((theta, se)) = self.range_rotation(reference, &pose)
+                {
+                    range_theta = Some(theta);
+                    if reference.is_map() {
+                        range_se = se;
+                    }
                 }
             }
             let Some(next) = self.closest_step(reference, local, &pose, range_theta, guess, prior)
@@ -135,7 +142,9 @@ impl<C: CorrespondenceMetric> Idc<C> {
             );
             let settled = if coarse {
                 let f = self.params.stage_tolerance;
-                moved < gate * f && turned < window_deg.to_radians() * f
+                moved < gate * f
+                    && (turned < window_deg.to_radians() * f
+                        || turned < self.params.stage_sigmas * range_se)
             } else {
                 self.icp.small_step(&pose, &next)
                     || (moved < self.params.settle_translation

@@ -8,17 +8,39 @@
 //! bag without odometry (`tests/rosbag_cli.rs`), where it is why the rule is off by default.
 
 use qicp_core::testdata::{SplitMix, SyntheticWorld};
-use qicp_core::{ClosestPoint, Merge, MutualNearest, Pose2, QuadTree, Reference, ScanMatcher};
-use qicp_matchers::{IcpParams, Wsm, WsmParams};
+use qicp_core::{
+    ClosestPoint, Matrix3, Merge, MutualNearest, Pose2, QuadTree, Reference, ScanMatcher, Vector3,
+};
+use qicp_matchers::{IcpParams, Idc, IdcParams, Wsm, WsmParams};
+
+/// How a trial's match starts: from up to 0.15 m and 3° off without a prior, or (as the
+/// pipeline matches) from up to 5 cm and 1° off with odometry's prior of 5 cm and 1°.
+#[derive(Clone, Copy, PartialEq)]
+enum Start {
+    Far,
+    WithPrior,
+}
 
 /// Seeded trials: a reference of two scans of `world`, merged into a map (`map`) or the
-/// first alone, and a scan 0.3 m on, matched from a start up to 0.15 m and 3° off. Returns
-/// each trial's truth, estimate and iterations.
+/// first alone, and a scan 0.3 m on, matched from `start`. Returns each trial's truth,
+/// estimate and iterations.
 fn trials<M: ScanMatcher>(
     world: &SyntheticWorld,
     map: bool,
+    start: Start,
     mut matcher: impl FnMut() -> M,
 ) -> Vec<(Pose2, Pose2, u32)> {
+    let (off_xy, off_deg) = match start {
+        Start::Far => (0.15, 3.0),
+        Start::WithPrior => (0.05, 1.0),
+    };
+    let prior = (start == Start::WithPrior).then(|| {
+        Matrix3::from_diagonal(&Vector3::new(
+            0.05f64.powi(-2),
+            0.05f64.powi(-2),
+            1f64.to_radians().powi(-2),
+        ))
+    });
     let mut rng = SplitMix::new(7);
     (0..30)
         .map(|k| {
@@ -41,12 +63,12 @@ fn trials<M: ScanMatcher>(
             }
             let truth = from * Pose2::new(0.3, 0.05, 0.04);
             let scan = world.scan(&truth, 0.01, 3 * k + 2);
-            let start = Pose2::new(
-                truth.x + rng.range(-0.15, 0.15),
-                truth.y + rng.range(-0.15, 0.15),
-                truth.theta + rng.range(-3.0, 3.0).to_radians(),
+            let guess = Pose2::new(
+                truth.x + rng.range(-off_xy, off_xy),
+                truth.y + rng.range(-off_xy, off_xy),
+                truth.theta + rng.range(-off_deg, off_deg).to_radians(),
             );
-            let r = matcher().match_scan(&reference, &scan, start);
+            let r = matcher().match_with_prior(&reference, &scan, guess, prior);
             assert!(r.fallback.is_none(), "trial {k}: {:?}", r.fallback);
             (truth, r.pose, r.iterations)
         })
@@ -72,11 +94,12 @@ fn score(r: &[(Pose2, Pose2, u32)]) -> (f64, f64, f64, u32) {
 }
 
 /// `early` is as accurate as `full` (mean errors within 10 % of its own, and no match off by
-/// more than 2 cm) and takes at most `share` of its iterations.
+/// more than 2 cm, or than 1.1 × `full`'s worst where that is larger: IDC leaves one corridor
+/// match 8.7 cm off either way, from far) and takes at most `share` of its iterations.
 fn as_accurate_in_fewer(early: &[(Pose2, Pose2, u32)], full: &[(Pose2, Pose2, u32)], share: f64) {
     let (e, f) = (score(early), score(full));
     assert!(
-        e.0 <= 1.1 * f.0 + 1e-4 && e.1 <= 1.1 * f.1 + 0.002 && e.2 < 0.02,
+        e.0 <= 1.1 * f.0 + 1e-4 && e.1 <= 1.1 * f.1 + 0.002 && e.2 < 0.02f64.max(1.1 * f.2),
         "early: {:.4} m, {:.3}°, worst {:.4} m; full: {:.4} m, {:.3}°, worst {:.4} m",
         e.0,
         e.1,
@@ -109,10 +132,10 @@ fn wsm_settling_early_against_a_map_is_as_accurate_in_fewer_iterations() {
     // Measured: room 2.13 against 2.16 mm and 0.039 against 0.041°, corridor 5.40 against
     // 5.21 mm and 0.075 against 0.074° on average, in 0.47 and 0.41 of the iterations.
     for world in [SyntheticWorld::room(), SyntheticWorld::corridor()] {
-        let early = trials(&world, true, || {
+        let early = trials(&world, true, Start::Far, || {
             Wsm::<MutualNearest<QuadTree>>::new(IcpParams::default(), early())
         });
-        let full = trials(&world, true, || {
+        let full = trials(&world, true, Start::Far, || {
             Wsm::<MutualNearest<QuadTree>>::new(IcpParams::default(), WsmParams::default())
         });
         as_accurate_in_fewer(&early, &full, 0.6);
@@ -122,12 +145,57 @@ fn wsm_settling_early_against_a_map_is_as_accurate_in_fewer_iterations() {
 #[test]
 fn scan_to_scan_wsm_iterates_every_stage_to_the_tolerances() {
     for world in [SyntheticWorld::room(), SyntheticWorld::corridor()] {
-        let early = trials(&world, false, || {
+        let early = trials(&world, false, Start::Far, || {
             Wsm::<ClosestPoint>::new(IcpParams::default(), early())
         });
-        let full = trials(&world, false, || {
+        let full = trials(&world, false, Start::Far, || {
             Wsm::<ClosestPoint>::new(IcpParams::default(), WsmParams::default())
         });
         assert_eq!(early, full);
+    }
+}
+
+/// IDC ending a wide stage once its step turns less than two standard errors of the range
+/// rule's rotation. Its default, `IdcParams::default()`, ends one below a fiftieth of the
+/// window.
+fn within_noise() -> IdcParams {
+    IdcParams {
+        stage_sigmas: 2.0,
+        ..IdcParams::default()
+    }
+}
+
+#[test]
+fn idc_settling_within_the_range_rules_noise_against_a_map_is_as_accurate() {
+    // Measured (mean error; iterations, the rule's against the full stages'): from far, room
+    // 2.78 against 2.83 mm, 352 against 358, corridor 24.3 against 25.0 mm, 559 against 539;
+    // with the prior, room 2.84 against 2.80 mm, 259 against 271, corridor 16.8 against
+    // 16.9 mm, 307 against 322. On these clean maps the wide stages settle below a fiftieth
+    // of the window anyway; Intel's clutter is where the rule saves (tests/intel_matching.rs).
+    for start in [Start::Far, Start::WithPrior] {
+        for world in [SyntheticWorld::room(), SyntheticWorld::corridor()] {
+            let within_noise = trials(&world, true, start, || {
+                Idc::<MutualNearest<QuadTree>>::new(IcpParams::default(), within_noise())
+            });
+            let to_a_fiftieth = trials(&world, true, start, || {
+                Idc::<MutualNearest<QuadTree>>::new(IcpParams::default(), IdcParams::default())
+            });
+            as_accurate_in_fewer(&within_noise, &to_a_fiftieth, 1.1);
+        }
+    }
+}
+
+#[test]
+fn scan_to_scan_idc_ends_its_wide_stages_at_a_fiftieth_of_the_window() {
+    for start in [Start::Far, Start::WithPrior] {
+        for world in [SyntheticWorld::room(), SyntheticWorld::corridor()] {
+            let with_rule = trials(&world, false, start, || {
+                Idc::<ClosestPoint>::new(IcpParams::default(), within_noise())
+            });
+            let by_default = trials(&world, false, start, || {
+                Idc::<ClosestPoint>::new(IcpParams::default(), IdcParams::default())
+            });
+            assert_eq!(with_rule, by_default);
+        }
     }
 }

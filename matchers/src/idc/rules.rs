@@ -78,8 +78,13 @@ const CAUCHY: f64 = 2.385;
 
 /// A robust weighted mean of `(value, weight)` samples: starts from the weighted median and
 /// reweights by Cauchy's function of the residual, scaled by the median absolute deviation
-/// (at least `floor`), so a few wrong pairs cannot pull it far.
-fn robust_mean(samples: &mut [(f64, f64)], scratch: &mut Vec<f64>, floor: f64) -> Option<f64> {
+/// (at least `floor`), so a few wrong pairs cannot pull it far. Also its standard error: that
+/// scale (σ, 1.4826 × the deviation, at least `floor`) over √n.
+fn robust_mean(
+    samples: &mut [(f64, f64)],
+    scratch: &mut Vec<f64>,
+    floor: f64,
+) -> Option<(f64, f64)> {
     let total: f64 = samples.iter().map(|s| s.1).sum();
     if samples.is_empty() || total.is_nan() || total <= 0.0 {
         return None;
@@ -98,7 +103,8 @@ fn robust_mean(samples: &mut [(f64, f64)], scratch: &mut Vec<f64>, floor: f64) -
     scratch.extend(samples.iter().map(|s| (s.0 - m).abs()));
     let mid = scratch.len() / 2;
     let mad = *scratch.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let c = CAUCHY * (1.4826 * mad).max(floor);
+    let sigma = (1.4826 * mad).max(floor);
+    let c = CAUCHY * sigma;
     for _ in 0..ROBUST_ITERATIONS {
         let (mut sum, mut weight) = (0.0, 0.0);
         for (v, w) in samples.iter() {
@@ -109,7 +115,7 @@ fn robust_mean(samples: &mut [(f64, f64)], scratch: &mut Vec<f64>, floor: f64) -
         }
         m = sum / weight;
     }
-    Some(m)
+    Some((m, sigma / (samples.len() as f64).sqrt()))
 }
 
 /// Reweighting rounds of the robust estimates.
@@ -121,12 +127,13 @@ impl<C: CorrespondenceMetric> Idc<C> {
     /// The rotation the matching-range pairs give at `pose` (Lu & Milios Eq. 11): the mean
     /// bearing difference, weighted by (r·tan β)² and made robust (Cauchy, see
     /// [`robust_mean`]): in clutter a few grazing-incidence pairs with huge weights used to
-    /// swing it by degrees from one iteration to the next.
+    /// swing it by degrees from one iteration to the next. Also the rotation's standard error
+    /// (rad; see [`robust_mean`]).
     pub(super) fn range_rotation<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,
         pose: &Pose2,
-    ) -> Option<f64> {
+    ) -> Option<(f64, f64)> {
         let o = Point2::new(pose.x, pose.y);
         let info = reference.info();
         self.samples.clear();
@@ -147,7 +154,7 @@ impl<C: CorrespondenceMetric> Idc<C> {
             }
         }
         robust_mean(&mut self.samples, &mut self.scratch, ROBUST_ANGLE_FLOOR)
-            .map(|d| pose.theta + d)
+            .map(|(d, se)| (pose.theta + d, se))
     }
 
     /// One closest-point step from `pose` with the current pairs: each scan point pairs with
