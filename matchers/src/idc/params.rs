@@ -50,7 +50,7 @@ pub struct IdcParams {
     /// range rule's rotation (the robust spread of its pairs' bearing differences over √n):
     /// a turn within the estimate's own noise is the jitter of pairs switching between the
     /// map's overlapping samples, not progress. Default 0 (off). At 2, q-idc runs 0.82 of the
-    /// iterations on Intel, and its sweeps of Intel, mirrored, played backwards, MIT CSAIL
+    /// iterations on Intel's first 3,000 records, and its sweeps of Intel, mirrored, played backwards, MIT CSAIL
     /// and the Freiburg clinic keep the variants over the bound they had; but without
     /// odometry, where a constant-velocity start may lie 0.3 m and 3° off, a stage ends
     /// before it pulled the scan in, and Intel's default run scored 0.309 m against 0.025 m
