@@ -407,8 +407,8 @@ fn idc_scan_to_scan_on_intel_in_file_order_stays_under_0_3_m() {
 }
 
 /// Against a map, IDC can end a wide stage once its step turns less than two standard errors
-/// of the range rule's rotation (`[matcher.idc] stage_sigmas = 2`; off by default, as without
-/// odometry it lost Intel's map, docs/robustness.md): the turns below that are pairs
+/// of the range rule's rotation (`[matcher.idc] stage_sigmas = 2`; off by default, as Intel's
+/// whole run scores worse with it, docs/robustness.md): the turns below that are pairs
 /// switching between the map's overlapping samples. On Intel's first 3,000 records q-idc
 /// then runs fewer iterations than iterating each wide stage until its step is a fiftieth of
 /// the window (the default), and scores within a few millimetres of it. Measured:

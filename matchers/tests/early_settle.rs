@@ -11,8 +11,8 @@
 //! of the range rule's rotation (`[matcher.idc] stage_sigmas = 2`; off by default): as
 //! accurate here, scan to scan the same. On these clean maps its wide stages settle below a
 //! fiftieth of the window anyway, and the saving shows on Intel's clutter
-//! (`tests/intel_matching.rs`); what it loses shows only on Intel without odometry, whose run
-//! lost the map with it (docs/robustness.md), which is why it is off.
+//! (`tests/intel_matching.rs`); what it loses shows on Intel's real runs (a few millimetres
+//! with odometry, the map without), which is why it is off (docs/robustness.md).
 
 use qicp_core::testdata::{SplitMix, SyntheticWorld};
 use qicp_core::{
