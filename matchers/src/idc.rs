@@ -47,10 +47,6 @@ impl<C: CorrespondenceMetric + Default> Idc<C> {
 /// Distance to the reference surface up to which the verification counts a point as
 /// explained (m); farther points cost as much as this.
 const VERIFY_DISTANCE: f64 = 0.05;
-/// An initial guess whose misfit exceeds this fraction of the largest possible (every point
-/// unexplained) is not trusted as a prior. On the Intel log the results' misfits have median
-/// 0.07 and 99th percentile 0.27 of it.
-const SUSPECT_GUESS: f64 = 0.4;
 
 impl<C: CorrespondenceMetric> Idc<C> {
     /// Iterates both rules from `start` with the gate schedule at `first_level` until the
@@ -223,7 +219,10 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         let guess_misfit = Self::misfit(reference, local, &guess);
         let suspect = self.params.verify
             && guess_misfit
-                > SUSPECT_GUESS * local.len() as f64 * VERIFY_DISTANCE * VERIFY_DISTANCE;
+                > self.params.suspect_guess
+                    * local.len() as f64
+                    * VERIFY_DISTANCE
+                    * VERIFY_DISTANCE;
         let prior = if suspect { None } else { prior.as_ref() };
         let end = self
             .params

@@ -5,6 +5,13 @@ backwards, with its relations transformed to match.
     python python/benchmarks/derived_logs.py reverse LOG RELATIONS OUT_LOG OUT_RELATIONS
     qicp sweep OUT_LOG --matcher q-wsm --relations OUT_RELATIONS
 
+A log without relations (MIT CSAIL, the Freiburg clinic) is swept against a trajectory of it
+(`qicp sweep … --reference TUM`); `--trajectory TUM OUT_TUM` transforms one with the log,
+and `-` stands for the relations:
+
+    python python/benchmarks/derived_logs.py reverse LOG - OUT_LOG - --trajectory TUM OUT_TUM
+    qicp sweep OUT_LOG --matcher q-idc --reference OUT_TUM
+
 A matcher tuned on one log may owe part of its score to that log's chance: which corridor a
 drift happened to slide along, which way the robot turned first. The two derived logs hold the
 same building, laser and odometry, and their relations are exact, but every match is a
@@ -182,13 +189,42 @@ def relations(lines, kind, log_lines):
     return out
 
 
+def trajectory(lines, kind, log_lines):
+    """A TUM trajectory (t x y z qx qy qz qw, stamps as the log's ipc timestamps, a pure yaw)
+    for the derived log: mirrored, y, qx and qz negated (the yaw θ becomes −θ); played
+    backwards, each stamp mapped as the log's and the poses in reverse order, as its laser
+    lines."""
+    ipc = time_map(log_lines) if kind == "reverse" else None
+    head, poses = [], []
+    for line in lines:
+        f = line.split()
+        if len(f) < 8 or line.lstrip().startswith("#"):
+            head.append(line)
+            continue
+        if kind == "mirror":
+            negate_at(f, 2, 4, 6)
+        else:
+            f[0] = ipc(f[0])
+        poses.append(f)
+    if kind == "reverse":
+        poses.reverse()
+    return head + [" ".join(f) for f in poses]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("kind", choices=["mirror", "reverse"])
     parser.add_argument("log", type=pathlib.Path, help="CARMEN log (plain or .bz2)")
-    parser.add_argument("relations", type=pathlib.Path, help="its relations")
+    parser.add_argument("relations", help="its relations (- for none)")
     parser.add_argument("out_log", type=pathlib.Path)
-    parser.add_argument("out_relations", type=pathlib.Path)
+    parser.add_argument("out_relations", help="(- with no relations)")
+    parser.add_argument(
+        "--trajectory",
+        nargs=2,
+        metavar=("TUM", "OUT_TUM"),
+        type=pathlib.Path,
+        help="also transform a trajectory of the log (TUM), e.g. the reference of a sweep",
+    )
     parser.add_argument(
         "--fov-deg",
         type=float,
@@ -200,10 +236,19 @@ def main(argv=None):
     log = read_lines(args.log)
     derived = mirror(log, args.fov_deg) if args.kind == "mirror" else reverse(log)
     args.out_log.write_text("\n".join(derived) + "\n")
-    rel = relations(read_lines(args.relations), args.kind, log)
-    args.out_relations.write_text("\n".join(rel) + "\n")
-    print(f"{args.kind}: {args.out_log} ({len(derived)} lines), ", end="")
-    print(f"{args.out_relations} ({len(rel)} relations)")
+    print(f"{args.kind}: {args.out_log} ({len(derived)} lines)", end="")
+    if (args.relations == "-") != (args.out_relations == "-"):
+        raise SystemExit("relations and out_relations: both files, or both -")
+    if args.relations != "-":
+        rel = relations(read_lines(args.relations), args.kind, log)
+        pathlib.Path(args.out_relations).write_text("\n".join(rel) + "\n")
+        print(f", {args.out_relations} ({len(rel)} relations)", end="")
+    if args.trajectory:
+        tum, out_tum = args.trajectory
+        poses = trajectory(read_lines(tum), args.kind, log)
+        out_tum.write_text("\n".join(poses) + "\n")
+        print(f", {out_tum} ({len(poses)} poses)", end="")
+    print()
 
 
 if __name__ == "__main__":

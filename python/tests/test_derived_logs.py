@@ -125,3 +125,60 @@ def test_a_mirrored_log_reads_as_the_mirror_image(intel, tmp_path):
         np.testing.assert_allclose(pb, pa * [1.0, -1.0], atol=1e-9)
         (x, y, theta), (mx, my, mtheta) = a.odometry, b.odometry
         assert (mx, my, mtheta) == pytest.approx((x, -y, -theta), abs=1e-12)
+
+
+def tum_from_odometry(log):
+    """The log's laser odometry as a TUM trajectory (pure yaw), stamped as the laser lines."""
+    out = []
+    for fields in map(str.split, log):
+        if fields and fields[0] == "FLASER":
+            n = int(fields[1])
+            x, y, theta = map(float, fields[2 + n + 3 : 2 + n + 6])
+            qz, qw = math.sin(theta / 2), math.cos(theta / 2)
+            out.append(f"{fields[-3]} {x!r} {y!r} 0 0 0 {qz!r} {qw!r}")
+    return out
+
+
+def poses(tum):
+    """Stamp -> (x, y, θ) of a TUM trajectory."""
+    out = {}
+    for f in map(str.split, tum):
+        x, y, qz, qw = float(f[1]), float(f[2]), float(f[6]), float(f[7])
+        out[f[0]] = (x, y, 2 * math.atan2(qz, qw))
+    return out
+
+
+def between(a, b):
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return c * dx + s * dy, -s * dx + c * dy, math.remainder(b[2] - a[2], 2 * math.pi)
+
+
+def test_a_derived_trajectory_agrees_with_the_derived_relations(intel):
+    # A sweep of a derived log without relations is scored against a reference trajectory
+    # transformed with it: relations drawn along that trajectory must be the transformed
+    # relations of the original, and transforming twice gives the trajectory back.
+    log = intel_head(intel, 3000)
+    tum = tum_from_odometry(log)
+    stamps = [line.split()[0] for line in tum][::40]
+    pairs = list(zip(stamps, stamps[1:]))
+    original = poses(tum)
+    relations = []
+    for a, b in pairs:
+        dx, dy, dth = between(original[a], original[b])
+        relations.append(f"{a} {b} {dx!r} {dy!r} 0 0 0 {dth!r}")
+    assert len(relations) > 10
+    for kind in ("mirror", "reverse"):
+        log_once = derived_logs.reverse(log) if kind == "reverse" else log
+        once = derived_logs.trajectory(tum, kind, log)
+        close(numbers(derived_logs.trajectory(once, kind, log_once)), numbers(tum))
+        moved = poses(once)
+        for relation in derived_logs.relations(relations, kind, log):
+            f = relation.split()
+            expected = (float(f[2]), float(f[3]), float(f[7]))
+            got = between(moved[f[0]], moved[f[1]])
+            assert got == pytest.approx(expected, abs=1e-9), (kind, f[:2])
+    # Played backwards, the poses run in the order of the reversed log's laser lines (file
+    # order: Intel's stamps jitter).
+    back = [line.split()[0] for line in derived_logs.trajectory(tum, "reverse", log)]
+    assert back == [line.split()[0] for line in tum_from_odometry(derived_logs.reverse(log))]
