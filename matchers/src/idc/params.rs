@@ -77,8 +77,8 @@ pub struct IdcParams {
     /// 0.4: on Intel the results' misfits have median 0.06 and 99th percentile 0.2, and 2.4 %
     /// of the guesses lie above 0.4; on MIT CSAIL the results' median is 0.09, the guesses'
     /// 0.23, and 28 % lie above. Never dropping the prior keeps q-idc on MIT CSAIL played
-    /// backwards and gains in the park, but costs Intel 2.4 mm (docs/limits.md, "IDC drops
-    /// odometry's prior").
+    /// backwards and gains in the park, but costs Intel 2.4 mm, and Intel without odometry 5
+    /// sweep variants above 0.05 m (docs/limits.md, "IDC drops odometry's prior").
     pub suspect_guess: f64,
 }
 
