@@ -232,13 +232,13 @@ def main(argv=None):
         "else 180), as `qicp match --fov-deg`",
     )
     args = parser.parse_args(argv)
+    if (args.relations == "-") != (args.out_relations == "-"):
+        parser.error("relations and out_relations: both files, or both -")
     decimal.getcontext().prec = 40
     log = read_lines(args.log)
     derived = mirror(log, args.fov_deg) if args.kind == "mirror" else reverse(log)
     args.out_log.write_text("\n".join(derived) + "\n")
     print(f"{args.kind}: {args.out_log} ({len(derived)} lines)", end="")
-    if (args.relations == "-") != (args.out_relations == "-"):
-        raise SystemExit("relations and out_relations: both files, or both -")
     if args.relations != "-":
         rel = relations(read_lines(args.relations), args.kind, log)
         pathlib.Path(args.out_relations).write_text("\n".join(rel) + "\n")

@@ -67,9 +67,10 @@ pub struct IdcParams {
     pub settle_rotation_deg: f64,
     /// Check the initial guess against the scan (squared distances of the points to the
     /// reference surface, truncated at 5 cm): one that explains it very badly is not used as a
-    /// prior (`suspect_guess`); after the iteration, when the guess explains the scan better than the result,
-    /// it is refined with the closest-point rule alone and whichever explains the scan best
-    /// is kept. One wrong match must not enter a map that is never forgotten. Default true.
+    /// prior (`suspect_guess`); after the iteration, when the guess explains the scan better
+    /// than the result, it is refined with the closest-point rule alone and whichever explains
+    /// the scan best is kept. One wrong match must not enter a map that is never forgotten.
+    /// Default true.
     pub verify: bool,
     /// With `verify`, an initial guess whose misfit (as `verify` measures it) exceeds this
     /// share of the largest, every point unexplained, is no prior: the match runs as if none
