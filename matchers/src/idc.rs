@@ -2,7 +2,7 @@
 use crate::icp::{IcpParams, Schedule, move_points, residual, trim};
 use qicp_core::{
     ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix3, Pair,
-    Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex,
+    Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex, dist_sq,
 };
 
 mod params;
@@ -223,11 +223,12 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
                     * local.len() as f64
                     * VERIFY_DISTANCE
                     * VERIFY_DISTANCE;
-        let prior = if suspect { None } else { prior.as_ref() };
+        let given = prior.as_ref();
+        let mut prior = if suspect { None } else { given };
         let end = self
             .params
             .end_window_deg(scan.geometry.angle_increment.to_degrees());
-        let window = (self.params.first_window_deg(prior, end), end);
+        let mut window = (self.params.first_window_deg(prior, end), end);
         let first_level = self.params.first_level(&self.icp, prior);
         let (mut pose, mut iterations, mut converged) =
             match self.iterate(reference, local, guess, &guess, prior, window, first_level) {
@@ -235,10 +236,33 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
                 Err(why) => return MatchResult::fallback(guess, why),
             };
         if self.params.verify {
+            let mut misfit = Self::misfit(reference, local, &pose);
+            // A guess that explains its scan badly may still be right where the scan fits the
+            // map poorly anywhere (clutter, a fast turn): matched with its prior as well
+            // (`suspect_with_prior`), the match that explains the scan best is kept.
+            if suspect && self.params.suspect_with_prior && given.is_some() {
+                let with = (self.params.first_window_deg(given, end), end);
+                let level = self.params.first_level(&self.icp, given);
+                if let Ok((again, more, settled)) =
+                    self.iterate(reference, local, guess, &guess, given, with, level)
+                {
+                    iterations += more;
+                    let again_misfit = Self::misfit(reference, local, &again);
+                    // Two matches that no point of the scan tells apart by the check's
+                    // distance are one: the first stands.
+                    let apart = local.iter().any(|b| {
+                        dist_sq(&pose.transform_point(b), &again.transform_point(b))
+                            > VERIFY_DISTANCE * VERIFY_DISTANCE
+                    });
+                    if apart && again_misfit < misfit {
+                        (pose, converged, misfit) = (again, settled, again_misfit);
+                        (prior, window) = (given, with);
+                    }
+                }
+            }
             // The initial guess explains the scan better than the result: the iteration went
             // astray (a wide window's range pairs, a local minimum). Refine the guess with the
             // closest-point rule alone, at the last gate, and keep whichever fits best.
-            let misfit = Self::misfit(reference, local, &pose);
             if guess_misfit < misfit {
                 let last = self.icp.last_level();
                 if let Ok((again, more, settled)) =
