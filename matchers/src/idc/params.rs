@@ -176,7 +176,7 @@ impl Algorithm for IdcAlgorithm {
         Param::new(
             "suspect_with_prior",
             Range::Flag,
-            "with verify, a suspect guess is also matched with its prior; the better fit is kept",
+            "with verify, a suspect guess is also matched with its prior; apart, the better fit is kept",
         ),
     ];
     type Params = IdcParams;
