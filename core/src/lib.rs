@@ -34,7 +34,7 @@ pub use index::{
     fresh_revision, nearest_then_around,
 };
 pub use kdtree::KdTree;
-pub use matcher::ScanMatcher;
+pub use matcher::{PriorSource, ScanMatcher};
 pub use metric::{ClosestPoint, CorrespondenceMetric, MatchingRange, MutualNearest, Pair, Query};
 pub use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 pub use pose::{Pose2, normalize_angle};

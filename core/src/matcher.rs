@@ -5,6 +5,16 @@ use crate::reference::Reference;
 use crate::{MatchResult, Pose2, Scan};
 use nalgebra::Matrix3;
 
+/// Where a match's prior comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PriorSource {
+    /// Odometry: a measurement of the motion since the last scan.
+    Odometry,
+    /// A motion model's prediction where no odometry moves (a log without odometry): the
+    /// motion at the last velocity, no measurement.
+    Prediction,
+}
+
 /// Estimates where a scan was taken, relative to a reference.
 ///
 /// Generic over the reference's index so that the correspondence search, the hot loop, is
@@ -24,6 +34,22 @@ pub trait ScanMatcher {
         guess: Pose2,
         prior: Option<Matrix3<f64>>,
     ) -> MatchResult;
+
+    /// [`match_with_prior`](Self::match_with_prior), told where the prior comes from
+    /// ([`match_with_prior`](Self::match_with_prior) stands for odometry's). Matchers that
+    /// trust a measured prior further than a prediction override it; by default the source
+    /// is ignored.
+    fn match_with_prior_from<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan: &Scan,
+        guess: Pose2,
+        prior: Option<Matrix3<f64>>,
+        source: PriorSource,
+    ) -> MatchResult {
+        let _ = source;
+        self.match_with_prior(reference, scan, guess, prior)
+    }
 
     /// The spacing (m) below which a new map point adds nothing this matcher can use, for a
     /// laser of `noise`: the default density bound of a map it matches against

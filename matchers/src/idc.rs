@@ -2,7 +2,7 @@
 use crate::icp::{IcpParams, Schedule, move_points, residual, trim};
 use qicp_core::{
     ClosestPoint, CorrespondenceMetric, Fallback, MatchResult, MatchingRange, Matrix3, Pair,
-    Point2, Pose2, Query, Reference, Scan, ScanMatcher, SpatialIndex, dist_sq,
+    Point2, Pose2, PriorSource, Query, Reference, Scan, ScanMatcher, SpatialIndex, dist_sq,
 };
 
 mod params;
@@ -199,8 +199,9 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         0.05
     }
 
-    /// The prior (odometry) is fused with each iteration's estimate through the information
-    /// of the closest-point pairs, and sizes the range rule's first window.
+    /// The prior, taken as odometry's ([`PriorSource::Odometry`]), is fused with each
+    /// iteration's estimate through the information of the closest-point pairs, and sizes
+    /// the range rule's first window.
     fn match_with_prior<I: SpatialIndex>(
         &mut self,
         reference: &Reference<I>,
@@ -208,14 +209,27 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
         guess: Pose2,
         prior: Option<Matrix3<f64>>,
     ) -> MatchResult {
+        self.match_with_prior_from(reference, scan, guess, prior, PriorSource::Odometry)
+    }
+
+    /// A suspect guess is matched with its prior as well only where the prior is odometry's
+    /// ([`IdcParams::suspect_with_prior`]).
+    fn match_with_prior_from<I: SpatialIndex>(
+        &mut self,
+        reference: &Reference<I>,
+        scan: &Scan,
+        guess: Pose2,
+        prior: Option<Matrix3<f64>>,
+        source: PriorSource,
+    ) -> MatchResult {
         if let Some(why) = self.icp.cannot_match(scan, reference) {
             return MatchResult::fallback(guess, why);
         }
         let local = scan.points();
         self.closest.begin_scan(local);
         self.range_rule.begin_scan(local);
-        // Odometry that explains the scan this badly is wrong (the Intel log has records whose
-        // timestamps put them out of order): match without its prior, from a full window.
+        // A guess that explains the scan this badly may be wrong (odometry slipping in a fast
+        // turn, a record out of time order): match without its prior, from a full window.
         let guess_misfit = Self::misfit(reference, local, &guess);
         let suspect = self.params.verify
             && guess_misfit
@@ -237,10 +251,17 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
             };
         if self.params.verify {
             let mut misfit = Self::misfit(reference, local, &pose);
-            // A guess that explains its scan badly may still be right where the scan fits the
+            // Odometry that explains its scan badly may still be right where the scan fits the
             // map poorly anywhere (clutter, a fast turn): matched with its prior as well
-            // (`suspect_with_prior`), the match that explains the scan best is kept.
-            if suspect && self.params.suspect_with_prior && given.is_some() {
+            // (`suspect_with_prior`), the prior's match is kept where it explains the scan
+            // better. A prediction without odometry is no measurement to look at again, and
+            // scan to scan no map keeps a wrong match.
+            if suspect
+                && self.params.suspect_with_prior
+                && source == PriorSource::Odometry
+                && reference.is_map()
+                && given.is_some()
+            {
                 let with = (self.params.first_window_deg(given, end), end);
                 let level = self.params.first_level(&self.icp, given);
                 if let Ok((again, more, settled)) =
@@ -249,12 +270,13 @@ impl<C: CorrespondenceMetric> ScanMatcher for Idc<C> {
                     iterations += more;
                     let again_misfit = Self::misfit(reference, local, &again);
                     // Two matches that no point of the scan tells apart by the check's
-                    // distance are one: the first stands.
+                    // distance are one, and a fit better by less than one point unexplained
+                    // (a few trunks' five pairs) is no evidence: the first stands.
                     let apart = local.iter().any(|b| {
                         dist_sq(&pose.transform_point(b), &again.transform_point(b))
                             > VERIFY_DISTANCE * VERIFY_DISTANCE
                     });
-                    if apart && again_misfit < misfit {
+                    if apart && again_misfit + VERIFY_DISTANCE * VERIFY_DISTANCE < misfit {
                         (pose, converged, misfit) = (again, settled, again_misfit);
                         (prior, window) = (given, with);
                     }

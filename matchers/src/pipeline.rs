@@ -13,8 +13,8 @@ use crate::validation::{
     replaces_without_level, rescues_refused,
 };
 use qicp_core::{
-    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, Record, Reference,
-    ScanMatcher, SpatialIndex,
+    Fallback, FullCell, LaserNoise, MatchResult, Matrix3, Merge, Point2, Pose2, PriorSource,
+    Record, Reference, ScanMatcher, SpatialIndex,
 };
 use serde::{Deserialize, Serialize};
 
@@ -697,7 +697,8 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
     /// says whether the match passed the check against a running level (none before the
     /// check has seen enough matches to set one).
     /// `by_odometry`: the prior is odometry's, which alone may hold the directions the scan
-    /// does not fix ([`MotionModel::hold_unobserved`]).
+    /// does not fix ([`MotionModel::hold_unobserved`]); otherwise it is a prediction
+    /// ([`PriorSource`]).
     fn match_checked(
         &mut self,
         scan: &qicp_core::Scan,
@@ -711,6 +712,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         let held = prior
             .filter(|_| by_odometry && self.motion.hold_unobserved)
             .map(|lambda| (lambda, guess));
+        let source = if by_odometry {
+            PriorSource::Odometry
+        } else {
+            PriorSource::Prediction
+        };
         let local = scan.points();
         // Without odometry, ICP starts from the search's best pose around the prediction
         // ([`CorrelativeParams::start_without_odometry`]), and from the prediction only where
@@ -718,11 +724,11 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         let started = (correlative_start && self.validator.params.enabled)
             .then(|| self.search.search(&self.reference, local, &guess))
             .flatten()
-            .map(|start| self.match_from(scan, start.pose, prior, held))
+            .map(|start| self.match_from(scan, start.pose, (prior, source), held))
             .filter(|(m, ..)| m.fallback.is_none());
         let (mut result, mut was_held, placed) = match started {
             Some(m) => m,
-            None => self.match_from(scan, guess, prior, held),
+            None => self.match_from(scan, guess, (prior, source), held),
         };
         if !self.validator.params.enabled {
             let check = Check {
@@ -751,7 +757,7 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
             check.searched = true;
             if let Some(start) = self.search.search(&self.reference, local, &guess) {
                 let (again, again_held, again_placed) =
-                    self.match_from(scan, start.pose, prior, held);
+                    self.match_from(scan, start.pose, (prior, source), held);
                 if again.fallback.is_none() {
                     let f = self.fit(local, &again, again_placed.as_ref());
                     // Only a match that passes the check replaces the first: one poor
@@ -810,22 +816,22 @@ impl<M: ScanMatcher, I: SpatialIndex> Pipeline<M, I> {
         (result, check, passed)
     }
 
-    /// The matcher's match of `scan` from `start` under `prior` (centred there), holding
-    /// the prediction in the direction the scan does not fix where `held` gives odometry's
-    /// prior and the prediction ([`MotionModel::hold_unobserved`]), and whether it held. The
-    /// scan placed at the match, paired with the reference within the check's reach, comes
-    /// with it where the hold judged the match and left its pose as it was: the check reads
-    /// the same look-ups.
+    /// The matcher's match of `scan` from `start` under `prior` (centred there, from
+    /// `source`), holding the prediction in the direction the scan does not fix where `held`
+    /// gives odometry's prior and the prediction ([`MotionModel::hold_unobserved`]), and
+    /// whether it held. The scan placed at the match, paired with the reference within the
+    /// check's reach, comes with it where the hold judged the match and left its pose as it
+    /// was: the check reads the same look-ups.
     fn match_from(
         &mut self,
         scan: &qicp_core::Scan,
         start: Pose2,
-        prior: Option<Matrix3<f64>>,
+        (prior, source): (Option<Matrix3<f64>>, PriorSource),
         held: Option<(Matrix3<f64>, Pose2)>,
     ) -> (MatchResult, bool, Option<Placed>) {
         let mut m = self
             .matcher
-            .match_with_prior(&self.reference, scan, start, prior);
+            .match_with_prior_from(&self.reference, scan, start, prior, source);
         let (Some((lambda, predicted)), None) = (held, m.fallback) else {
             return (m, false, None);
         };

@@ -81,19 +81,21 @@ pub struct IdcParams {
     /// backwards and gains in the park, but costs Intel 2.4 mm, and Intel without odometry 5
     /// sweep variants above 0.05 m (docs/limits.md, "IDC drops odometry's prior").
     pub suspect_guess: f64,
-    /// With `verify`, a guess found suspect (`suspect_guess`) is matched twice, without its
-    /// prior and with it. Where the two matches lie apart (some scan point farther from
-    /// itself than the check's 5 cm) the one whose misfit is lower is kept: a guess that
-    /// misfits because it is wrong (Intel's out-of-order records) loses to the search from
-    /// the widest window, one that misfits because the scan fits the map poorly (clutter, a
-    /// fast turn) keeps its prior. Two matches closer than that are one, and the match
-    /// without the prior stands: choosing the better fit among them would be choosing by the
-    /// scan's noise (choosing so, Intel without odometry scored 0.0689 m against 0.0246 m).
-    /// Costs one more match per suspect guess. Default false: it holds MIT CSAIL played
-    /// backwards (4 of 68 sweep variants above 0.05 m against 28) and costs Intel 0.5 mm, but
-    /// Intel without odometry has 3 of 68 variants over the sweep's bound against none, and
-    /// the park's sixty worlds 7 misses of the ATE target against 3 (docs/robustness.md, "a
-    /// suspect guess matched both ways where the matches lie apart").
+    /// With `verify`, against a map and under odometry's prior, a guess found suspect
+    /// (`suspect_guess`) is matched twice, without its prior and with it. The prior's match
+    /// replaces the first only where the two lie apart (some scan point farther from itself
+    /// than the check's 5 cm) and it leaves less misfit by more than one point unexplained
+    /// (5 cm squared): a guess that misfits because it is wrong loses to the search from the
+    /// widest window, one that misfits because the scan fits the map poorly (clutter, a fast
+    /// turn) keeps its prior. Two matches closer than that are one, and a fit better by less
+    /// than one point is no evidence (a park scan's five pairs): the first stands. A motion
+    /// model's prediction in a log without odometry is no measurement and is not matched
+    /// again, nor is a scan matched to one scan, where no map keeps a wrong match.
+    /// Costs one more match per suspect guess. Default true: MIT CSAIL played backwards has 3
+    /// of 68 sweep variants above 0.05 m against 28 without it, Intel played backwards none
+    /// over the sweep's bound against 1, and the park's ten worlds no world missing the ATE
+    /// target for q-idc (docs/robustness.md, "A suspect odometry guess matched both ways").
+    /// False matches a suspect guess without its prior alone.
     pub suspect_with_prior: bool,
 }
 
@@ -110,7 +112,7 @@ impl Default for IdcParams {
             settle_rotation_deg: 0.06,
             verify: true,
             suspect_guess: 0.4,
-            suspect_with_prior: false,
+            suspect_with_prior: true,
         }
     }
 }
@@ -176,7 +178,7 @@ impl Algorithm for IdcAlgorithm {
         Param::new(
             "suspect_with_prior",
             Range::Flag,
-            "with verify, a suspect guess is also matched with its prior; apart, the better fit is kept",
+            "with verify, against a map, a suspect odometry guess is also matched with its prior, kept where apart and better by one point",
         ),
     ];
     type Params = IdcParams;
