@@ -22,8 +22,8 @@ fn prior() -> Matrix3<f64> {
     ))
 }
 
-/// The room seen from two poses: the first scan is the reference (a map of it, every point
-/// kept), the second is matched.
+/// A world (the room unless said) seen from two poses: the first scan is the reference (a
+/// map of it, every point kept, unless said), the second is matched.
 struct View {
     reference: Reference<QuadTree>,
     truth: Pose2,
@@ -31,7 +31,7 @@ struct View {
 }
 
 impl View {
-    /// The robot drives 0.3 m and turns 2.3° between the scans.
+    /// The room; the robot drives 0.3 m and turns 2.3° between the scans.
     fn plain() -> Self {
         Self::of(SyntheticWorld::room())
     }
