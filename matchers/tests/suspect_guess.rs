@@ -170,6 +170,12 @@ fn far() -> Pose2 {
     Pose2::new(0.25, -0.2, 6f64.to_radians())
 }
 
+/// In the cluttered view, 3° off, where odometry's turn of 17° put it: the clutter makes
+/// this right guess suspect.
+fn right_in_clutter() -> Pose2 {
+    Pose2::new(0.02, -0.02, 3f64.to_radians())
+}
+
 fn near() -> Pose2 {
     Pose2::new(0.01, -0.01, 0.2f64.to_radians())
 }
@@ -208,8 +214,7 @@ fn a_guess_near_the_truth_is_the_prior_either_way() {
 #[test]
 fn a_right_guess_in_clutter_keeps_its_prior_when_matched_both_ways() {
     let view = View::cluttered();
-    // 3° off, where odometry's turn of 17° put it: the clutter makes the guess suspect.
-    let offset = Pose2::new(0.02, -0.02, 3f64.to_radians());
+    let offset = right_in_clutter();
     assert!(view.misfit_share(&(view.truth * offset)) > 0.4);
     // Without its prior, from the widest window, the match lands far off; with it, on the
     // truth, fitting the scan better.
@@ -265,7 +270,7 @@ fn a_right_guess_in_clutter_is_matched_once_under_a_prediction_or_scan_to_scan()
     // odometry's prior (above), is matched once, without the prior, where the prior is a
     // motion model's prediction (a log without odometry) or the reference is one scan.
     let view = View::cluttered();
-    let offset = Pose2::new(0.02, -0.02, 3f64.to_radians());
+    let offset = right_in_clutter();
     let dropped = view.matched(one_way(), offset, Some(prior()));
     let predicted = view.matched_from(both_ways(), offset, Some(prior()), PriorSource::Prediction);
     assert_eq!(predicted.pose, dropped.pose);
